@@ -1,0 +1,80 @@
+#pragma once
+// The loaded scene: meshes made of objects (OBJ o/g groups), instances placing meshes, a camera.
+// Only positions and faces are kept: canopy loads no attribute that it does not use.
+#include "accel/geometry.h"
+
+#include <glm/mat4x4.hpp>
+#include <cstdint>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace canopy {
+
+// Every bad input (file, field, option) raises this, with a message that names the file and the
+// line or field. The CLI prints it and exits non-zero.
+struct InputError : std::runtime_error {
+    using std::runtime_error::runtime_error;
+};
+
+struct Camera {
+    Vec3 eye{0, 0, 1};
+    Vec3 target{0, 0, 0};
+    Vec3 up{0, 1, 0};
+    float fov_deg = 50.0f;  // vertical
+};
+
+struct Material {
+    std::string name;
+    Vec3 kd{0.8f};
+};
+
+struct Object {
+    std::string name;
+    uint32_t first_triangle = 0;  // range in the mesh's triangle list
+    uint32_t triangle_count = 0;
+};
+
+struct Mesh {
+    std::string name;
+    std::vector<Vec3> positions;
+    std::vector<glm::uvec3> triangles;      // indices into positions
+    std::vector<uint32_t> triangle_material;  // per triangle, index into Scene::materials; empty: none
+    std::vector<Object> objects;             // contiguous, covering all triangles in order
+};
+
+struct Instance {
+    uint32_t mesh = 0;
+    glm::mat4 transform{1.0f};  // glm is column-major: transform[col][row]
+};
+
+struct Scene {
+    std::string name;
+    std::vector<Mesh> meshes;
+    std::vector<Instance> instances;  // never empty after loading: one identity instance per mesh if the file had none
+    std::vector<Material> materials;
+    std::optional<Camera> camera;     // absent: frame automatically (auto_camera)
+};
+
+// World-space triangle soup: every instance's triangles transformed, in instance order.
+struct FlatScene {
+    std::vector<Triangle> triangles;
+    std::vector<uint32_t> material;  // per triangle, or empty when the scene has no materials
+    std::vector<Material> materials;
+    BBox bounds;
+};
+
+FlatScene flatten(const Scene& scene);
+
+// BENCHMARK.md: target = bounds centre, eye = centre + normalize(0, 0.35, 1) * 1.1 * |diagonal|.
+Camera auto_camera(const BBox& bounds);
+
+// Loads a scene from a path (.json scene file or .obj) or a generator spec "gen:NAME?tris=N&seed=S".
+// The empty name loads the embedded default scene.
+Scene load_scene(const std::string& name);
+
+// Triangle count of the scene with instancing expanded.
+uint64_t instanced_triangle_count(const Scene& scene);
+
+}  // namespace canopy
