@@ -1,0 +1,409 @@
+// Procedural scenes of any size, "gen:NAME?tris=N&seed=S", each with a camera looking into it.
+//
+// Deterministic from the seed: the random stream is splitmix64 and its mapping to numbers is
+// canopy's own (std:: distributions differ between standard libraries). Geometry is computed in
+// double and rounded to float once, so a last-bit difference of libm or of FMA contraction in a
+// double almost never reaches the stored floats.
+//
+// Triangle counts are exact for box and triangles. Cylinders (open: 2 triangles per side) and
+// surface (closed) have even counts, so an odd N gives N + 1. Below a small minimum (box 118,
+// surface 18, cylinders 6) the minimum is produced.
+#include "scenes/loaders.h"
+
+#include <glm/geometric.hpp>
+#include <glm/vec3.hpp>
+
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <set>
+#include <string_view>
+
+namespace canopy {
+namespace {
+
+using glm::dvec3;
+constexpr double pi = 3.14159265358979323846;
+constexpr uint64_t max_triangles = 500'000'000;  // keeps every vertex index of every generator in uint32
+
+struct GeneratorSpec {
+    std::string text;  // the whole spec: names the scene and every error
+    std::string generator;
+    uint64_t triangles = 100'000;
+    uint64_t seed = 1;
+};
+
+[[noreturn]] void spec_error(const std::string& spec, const std::string& problem) {
+    throw InputError("scene spec '" + spec + "': " + problem);
+}
+
+uint64_t parse_integer(const std::string& spec, std::string_view key, std::string_view value) {
+    uint64_t number = 0;
+    const auto [end, error] = std::from_chars(value.data(), value.data() + value.size(), number);
+    if (error != std::errc() || end != value.data() + value.size() || value.empty())
+        spec_error(spec, "key '" + std::string(key) + "': '" + std::string(value) + "' is not a non-negative integer");
+    return number;
+}
+
+void apply_query_item(GeneratorSpec& parsed, std::string_view item, std::set<std::string>& seen) {
+    const size_t equals = item.find('=');
+    if (equals == std::string_view::npos) spec_error(parsed.text, "query item '" + std::string(item) + "' is not key=value");
+    const std::string key(item.substr(0, equals));
+    const std::string_view value = item.substr(equals + 1);
+    if (!seen.insert(key).second) spec_error(parsed.text, "key '" + key + "' is given twice");
+    if (key == "tris") {
+        parsed.triangles = parse_integer(parsed.text, key, value);
+        if (parsed.triangles == 0 || parsed.triangles > max_triangles)
+            spec_error(parsed.text, "key 'tris': must be in 1.." + std::to_string(max_triangles));
+    } else if (key == "seed") {
+        parsed.seed = parse_integer(parsed.text, key, value);
+    } else {
+        spec_error(parsed.text, "unknown key '" + key + "' (known: tris, seed)");
+    }
+}
+
+Scene generate_box(const GeneratorSpec& spec);
+Scene generate_cylinders(const GeneratorSpec& spec);
+Scene generate_surface(const GeneratorSpec& spec);
+Scene generate_triangles(const GeneratorSpec& spec);
+
+using Generator = Scene (*)(const GeneratorSpec&);
+
+Generator find_generator(std::string_view name) {
+    if (name == "box") return generate_box;
+    if (name == "cylinders") return generate_cylinders;
+    if (name == "surface") return generate_surface;
+    if (name == "triangles") return generate_triangles;
+    return nullptr;
+}
+
+GeneratorSpec parse_spec(const std::string& spec) {
+    GeneratorSpec parsed{spec, {}};
+    std::string_view rest(spec);
+    if (!rest.starts_with("gen:")) spec_error(spec, "a generator spec starts with 'gen:'");
+    rest.remove_prefix(4);
+    const size_t question = rest.find('?');
+    parsed.generator = std::string(rest.substr(0, question));
+    if (!find_generator(parsed.generator))
+        spec_error(spec, "unknown generator '" + parsed.generator + "' (known: box, cylinders, surface, triangles)");
+    if (question == std::string_view::npos) return parsed;
+    std::set<std::string> seen;
+    for (std::string_view query = rest.substr(question + 1);;) {
+        const size_t ampersand = query.find('&');
+        apply_query_item(parsed, query.substr(0, ampersand), seen);
+        if (ampersand == std::string_view::npos) return parsed;
+        query.remove_prefix(ampersand + 1);
+    }
+}
+
+class Random {
+public:
+    explicit Random(uint64_t seed) : state_(seed) {}
+
+    uint64_t next() {  // splitmix64
+        uint64_t z = (state_ += 0x9E3779B97F4A7C15ull);
+        z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+        z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+        return z ^ (z >> 31);
+    }
+    double uniform() { return double(next() >> 11) * 0x1.0p-53; }  // [0, 1), every value exact
+    double uniform(double lo, double hi) { return lo + (hi - lo) * uniform(); }
+    int integer(int lo, int hi) { return lo + int(next() % uint64_t(hi - lo + 1)); }  // inclusive
+    dvec3 point_in_box(double lo, double hi) { return {uniform(lo, hi), uniform(lo, hi), uniform(lo, hi)}; }
+    dvec3 direction() {  // uniform on the unit sphere
+        const double z = uniform(-1.0, 1.0), phi = uniform(0.0, 2.0 * pi), r = std::sqrt(1.0 - z * z);
+        return {r * std::cos(phi), r * std::sin(phi), z};
+    }
+
+private:
+    uint64_t state_;
+};
+
+uint64_t integer_sqrt(uint64_t x) {
+    auto root = uint64_t(std::sqrt(double(x)));
+    while (root * root > x) --root;
+    while ((root + 1) * (root + 1) <= x) ++root;
+    return root;
+}
+
+class MeshBuilder {
+public:
+    uint32_t vertex(const dvec3& p) {
+        mesh_.positions.emplace_back(Vec3(p));
+        return uint32_t(mesh_.positions.size() - 1);
+    }
+    void triangle(uint32_t a, uint32_t b, uint32_t c) {
+        mesh_.triangles.emplace_back(a, b, c);
+        ++mesh_.objects.back().triangle_count;
+    }
+    void begin_object(std::string name) {
+        mesh_.objects.push_back({std::move(name), uint32_t(mesh_.triangles.size()), 0});
+    }
+    uint32_t vertex_count() const { return uint32_t(mesh_.positions.size()); }
+
+    Scene into_scene(const std::string& name, const Camera& camera) && {
+        Scene scene;
+        scene.name = name;
+        mesh_.name = name;
+        scene.meshes.push_back(std::move(mesh_));
+        scene.instances.push_back({0, glm::mat4(1.0f)});
+        scene.camera = camera;
+        return scene;
+    }
+
+private:
+    Mesh mesh_;
+};
+
+// Picks `count` of `total` items, spread evenly, with no randomness.
+struct EvenSelection {
+    uint64_t count = 0;
+    uint64_t total = 1;
+    bool picks(uint64_t item) const { return (item + 1) * count / total > item * count / total; }
+};
+
+// A cols x rows grid of quads; point(i, j) maps grid coordinates to space. With wrap, the last
+// column and row join the first (a torus). Cells that `split` picks (numbered from first_cell)
+// are cut into 4 triangles about their centre instead of 2: each adds exactly 2 triangles and
+// keeps a closed surface closed, which is how closed surfaces reach an exact even count.
+template <class PointOf>
+void add_grid(MeshBuilder& mesh, uint32_t cols, uint32_t rows, bool wrap, const EvenSelection& split,
+              uint64_t first_cell, const PointOf& point) {
+    const uint32_t vertex_cols = wrap ? cols : cols + 1, vertex_rows = wrap ? rows : rows + 1;
+    const uint32_t base = mesh.vertex_count();
+    for (uint32_t j = 0; j < vertex_rows; ++j)
+        for (uint32_t i = 0; i < vertex_cols; ++i) mesh.vertex(point(double(i), double(j)));
+    const auto corner = [&](uint32_t i, uint32_t j) { return base + (j % vertex_rows) * vertex_cols + i % vertex_cols; };
+    for (uint32_t j = 0; j < rows; ++j) {
+        for (uint32_t i = 0; i < cols; ++i) {
+            const uint32_t a = corner(i, j), b = corner(i + 1, j), c = corner(i + 1, j + 1), d = corner(i, j + 1);
+            if (split.picks(first_cell + uint64_t(j) * cols + i)) {
+                const uint32_t m = mesh.vertex(point(i + 0.5, j + 0.5));
+                mesh.triangle(a, b, m);
+                mesh.triangle(b, c, m);
+                mesh.triangle(c, d, m);
+                mesh.triangle(d, a, m);
+            } else {
+                mesh.triangle(a, b, c);
+                mesh.triangle(a, c, d);
+            }
+        }
+    }
+}
+
+// The cube [-1, 1]^3 with n x n quads per face, mapped through place(). Points come from integer
+// lattice coordinates, so faces meeting at an edge compute bit-identical points: no cracks.
+template <class Place>
+void add_cube_surface(MeshBuilder& mesh, uint32_t n, uint64_t split_cells, const Place& place) {
+    const uint64_t cells_per_face = uint64_t(n) * n;
+    const EvenSelection split{split_cells, 6 * cells_per_face};
+    for (int face = 0; face < 6; ++face) {
+        const int axis = face / 2;
+        const bool positive = face % 2 == 1;
+        // Swapping the free axes on the negative faces keeps every face wound outwards.
+        const int u_axis = positive ? (axis + 1) % 3 : (axis + 2) % 3;
+        const int v_axis = positive ? (axis + 2) % 3 : (axis + 1) % 3;
+        add_grid(mesh, n, n, false, split, uint64_t(face) * cells_per_face, [&](double i, double j) {
+            dvec3 lattice;
+            lattice[axis] = positive ? n : 0;
+            lattice[u_axis] = i;
+            lattice[v_axis] = j;
+            return place(-1.0 + 2.0 * lattice / double(n));
+        });
+    }
+}
+
+// A cube surface of exactly `budget` triangles (even, at least 108 so that the split cells fit).
+template <class Place>
+void add_cube_with_budget(MeshBuilder& mesh, uint64_t budget, const Place& place) {
+    const auto n = uint32_t(integer_sqrt(budget / 12));
+    add_cube_surface(mesh, n, (budget - 12 * uint64_t(n) * n) / 2, place);
+}
+
+// ---- gen:box: a Cornell-like room, open at +z where the camera is, holding spheres and boxes.
+
+constexpr uint64_t min_box_shape_triangles = 108;  // a 3 x 3 cube: room for every split cell
+constexpr uint64_t room_triangles = 10;
+
+// A convex polygon as a fan from its first corner: corners - 2 triangles.
+void add_polygon(MeshBuilder& mesh, const std::string& name, std::initializer_list<dvec3> corners) {
+    mesh.begin_object(name);
+    const uint32_t first = mesh.vertex(*corners.begin());
+    for (auto corner = corners.begin() + 1; corner != corners.end(); ++corner) mesh.vertex(*corner);
+    for (uint32_t k = 1; k + 1 < corners.size(); ++k) mesh.triangle(first, first + k, first + k + 1);
+}
+
+// Room [-1, 1] x [0, 2] x [-1, 1], open at +z. An odd budget gives the back wall a fifth corner
+// (the middle of its floor edge) and so a third triangle.
+void add_room(MeshBuilder& mesh, bool odd) {
+    add_polygon(mesh, "floor", {{-1, 0, 1}, {1, 0, 1}, {1, 0, -1}, {-1, 0, -1}});
+    add_polygon(mesh, "ceiling", {{-1, 2, 1}, {-1, 2, -1}, {1, 2, -1}, {1, 2, 1}});
+    add_polygon(mesh, "left_wall", {{-1, 0, 1}, {-1, 0, -1}, {-1, 2, -1}, {-1, 2, 1}});
+    add_polygon(mesh, "right_wall", {{1, 0, -1}, {1, 0, 1}, {1, 2, 1}, {1, 2, -1}});
+    if (odd) add_polygon(mesh, "back_wall", {{0, 0, -1}, {1, 0, -1}, {1, 2, -1}, {-1, 2, -1}, {-1, 0, -1}});
+    else add_polygon(mesh, "back_wall", {{-1, 0, -1}, {1, 0, -1}, {1, 2, -1}, {-1, 2, -1}});
+}
+
+struct FloorCell {
+    dvec3 center;  // on the floor
+    double size;
+};
+
+void add_sphere(MeshBuilder& mesh, Random& random, const FloorCell& cell, uint64_t budget) {
+    const double radius = cell.size * random.uniform(0.25, 0.42);
+    const dvec3 center = cell.center + dvec3(0, radius, 0);
+    add_cube_with_budget(mesh, budget, [&](const dvec3& p) { return center + radius * glm::normalize(p); });
+}
+
+void add_box(MeshBuilder& mesh, Random& random, const FloorCell& cell, uint64_t budget) {
+    const dvec3 half(cell.size * random.uniform(0.18, 0.32), random.uniform(0.1, 0.6), cell.size * random.uniform(0.18, 0.32));
+    const double angle = random.uniform(0.0, 0.5 * pi), c = std::cos(angle), s = std::sin(angle);
+    const dvec3 center = cell.center + dvec3(0, half.y, 0);
+    add_cube_with_budget(mesh, budget, [&](const dvec3& p) {
+        const dvec3 q = p * half;
+        return center + dvec3(c * q.x + s * q.z, q.y, -s * q.x + c * q.z);
+    });
+}
+
+Scene generate_box(const GeneratorSpec& spec) {
+    const uint64_t wanted = std::max(spec.triangles, room_triangles + min_box_shape_triangles);
+    const bool odd = (wanted - room_triangles) % 2 == 1;
+    const uint64_t shape_budget = wanted - room_triangles - (odd ? 1 : 0);
+    // About sqrt(budget / 600) shapes: a handful for small scenes, up to 64 for millions.
+    const uint64_t shapes = std::clamp<uint64_t>(uint64_t(std::lround(std::sqrt(double(shape_budget) / 600.0))), 1,
+                                                 std::min<uint64_t>(64, shape_budget / min_box_shape_triangles));
+    const auto grid = uint32_t(std::ceil(std::sqrt(double(shapes))));
+    const double cell_size = 1.8 / grid;
+
+    Random random(spec.seed);
+    MeshBuilder mesh;
+    add_room(mesh, odd);
+    const uint64_t pairs = shape_budget / 2;
+    for (uint64_t k = 0; k < shapes; ++k) {
+        const uint64_t budget = 2 * (pairs / shapes + (k < pairs % shapes ? 1 : 0));
+        const double jitter = 0.1 * cell_size;
+        const FloorCell cell{{-0.9 + (double(k % grid) + 0.5) * cell_size + random.uniform(-jitter, jitter), 0.0,
+                              -0.9 + (double(k / grid) + 0.5) * cell_size + random.uniform(-jitter, jitter)},
+                             cell_size};
+        const bool sphere = random.uniform() < 0.5;
+        mesh.begin_object((sphere ? "sphere_" : "box_") + std::to_string(k));
+        if (sphere) add_sphere(mesh, random, cell, budget);
+        else add_box(mesh, random, cell, budget);
+    }
+    return std::move(mesh).into_scene(spec.text, {{0, 1.1, 3.0}, {0, 0.8, 0}, {0, 1, 0}, 40.0f});
+}
+
+// ---- gen:cylinders: a Power-Plant-like tangle of long, thin, open cylinders in [-1, 1]^3.
+
+void add_cylinder(MeshBuilder& mesh, Random& random, const dvec3& center, double spacing, uint32_t sides) {
+    const double length = std::min(random.uniform(3.0, 10.0) * spacing, 2.0);
+    const double radius = length * random.uniform(1.0 / 60.0, 1.0 / 25.0);
+    const dvec3 axis = random.direction();
+    const dvec3 helper = std::abs(axis.x) < 0.9 ? dvec3(1, 0, 0) : dvec3(0, 1, 0);
+    const dvec3 u = glm::normalize(glm::cross(axis, helper)), w = glm::cross(axis, u);
+    const uint32_t base = mesh.vertex_count();
+    for (uint32_t k = 0; k < sides; ++k) {
+        const double angle = 2.0 * pi * k / sides;
+        const dvec3 offset = radius * (std::cos(angle) * u + std::sin(angle) * w);
+        mesh.vertex(center - 0.5 * length * axis + offset);
+        mesh.vertex(center + 0.5 * length * axis + offset);
+    }
+    for (uint32_t k = 0; k < sides; ++k) {
+        const uint32_t bottom = base + 2 * k, top = bottom + 1;
+        const uint32_t next_bottom = base + 2 * ((k + 1) % sides), next_top = next_bottom + 1;
+        mesh.triangle(bottom, next_bottom, next_top);
+        mesh.triangle(bottom, next_top, top);
+    }
+}
+
+Scene generate_cylinders(const GeneratorSpec& spec) {
+    const uint64_t total_sides = std::max<uint64_t>((spec.triangles + 1) / 2, 3);
+    const uint64_t cylinders = std::max<uint64_t>(total_sides / 6, 1);  // 6 or 7 sides each
+    // Objects are the cylinders whose centres share a cell of a grid x grid x grid partition of
+    // the cube, about 256 cylinders each; their boxes overlap, as the Power Plant's parts do.
+    const auto grid = uint32_t(std::clamp<long>(std::lround(std::cbrt(double(cylinders) / 256.0)), 1, 16));
+    const uint64_t cells = uint64_t(grid) * grid * grid;
+    const double spacing = 2.0 / std::cbrt(double(cylinders)), cell_size = 2.0 / grid;
+
+    Random random(spec.seed);
+    MeshBuilder mesh;
+    uint64_t index = 0;
+    for (uint64_t cell = 0; cell < cells; ++cell) {
+        mesh.begin_object("cylinders_" + std::to_string(cell));
+        const dvec3 corner = dvec3(double(cell % grid), double(cell / grid % grid), double(cell / grid / grid)) * cell_size - 1.0;
+        const uint64_t in_cell = cylinders / cells + (cell < cylinders % cells ? 1 : 0);
+        for (uint64_t k = 0; k < in_cell; ++k, ++index) {
+            const auto sides = uint32_t(total_sides / cylinders + (index < total_sides % cylinders ? 1 : 0));
+            add_cylinder(mesh, random, corner + random.point_in_box(0.0, cell_size), spacing, sides);
+        }
+    }
+    return std::move(mesh).into_scene(spec.text, {{0, 0.9, 2.8}, {0, 0, 0}, {0, 1, 0}, 50.0f});
+}
+
+// ---- gen:surface: a Dragon-like bumpy torus from a regular grid: compact triangles of similar size.
+
+constexpr double ring_radius = 1.0, tube_radius = 0.35;
+
+struct Bump {
+    int ring_frequency, tube_frequency;  // integers, so the bumps wrap around seamlessly
+    double ring_phase, tube_phase, amplitude;
+};
+
+Scene generate_surface(const GeneratorSpec& spec) {
+    const uint64_t cells = std::max<uint64_t>((spec.triangles + 1) / 2, 9);
+    // Cells about square: rows around the tube and columns around the ring in the radii's ratio.
+    const auto rows = uint32_t(std::max<long>(std::lround(std::sqrt(double(cells) * tube_radius / ring_radius)), 3));
+    const auto cols = uint32_t(cells / rows);
+
+    Random random(spec.seed);
+    std::vector<Bump> bumps;
+    for (int k = 0; k < 4; ++k)  // amplitudes sum below 0.5: the tube never pinches shut
+        bumps.push_back({random.integer(2, 12), random.integer(1, 4), random.uniform(0, 2 * pi),
+                         random.uniform(0, 2 * pi), random.uniform(0.08, 0.12)});
+    const auto point = [&](double i, double j) {
+        const double ring = 2.0 * pi * i / cols, tube = 2.0 * pi * j / rows;
+        double bump = 0.0;
+        for (const Bump& b : bumps)
+            bump += b.amplitude * std::sin(b.ring_frequency * ring + b.ring_phase) * std::sin(b.tube_frequency * tube + b.tube_phase);
+        const double r = tube_radius * (1.0 + bump), spoke = ring_radius + r * std::cos(tube);
+        return dvec3(spoke * std::cos(ring), r * std::sin(tube), spoke * std::sin(ring));
+    };
+    MeshBuilder mesh;
+    mesh.begin_object("surface");
+    const uint64_t base_cells = uint64_t(cols) * rows;
+    add_grid(mesh, cols, rows, true, EvenSelection{cells - base_cells, base_cells}, 0, point);
+    return std::move(mesh).into_scene(spec.text, {{0, 1.7, 2.2}, {0, 0, 0}, {0, 1, 0}, 50.0f});
+}
+
+// ---- gen:triangles: large random triangles overlapping in [-1, 1]^3 (adversarial for any BVH).
+
+Scene generate_triangles(const GeneratorSpec& spec) {
+    // Each triangle spans about 8 mean spacings, so some 60 triangle boxes overlap any point.
+    const double size = std::min(16.0 / std::cbrt(double(spec.triangles)), 2.0), half = 0.5 * size;
+    Random random(spec.seed);
+    MeshBuilder mesh;
+    mesh.begin_object("triangles");
+    for (uint64_t t = 0; t < spec.triangles; ++t) {
+        const dvec3 center = random.point_in_box(-1.0 + half, 1.0 - half);
+        const uint32_t a = mesh.vertex(center + random.point_in_box(-half, half));
+        const uint32_t b = mesh.vertex(center + random.point_in_box(-half, half));
+        const uint32_t c = mesh.vertex(center + random.point_in_box(-half, half));
+        mesh.triangle(a, b, c);
+    }
+    return std::move(mesh).into_scene(spec.text, {{0, 0.8, 2.4}, {0, 0, 0}, {0, 1, 0}, 50.0f});
+}
+
+}  // namespace
+
+Scene generate_scene(const std::string& spec) {
+    const GeneratorSpec parsed = parse_spec(spec);
+    return find_generator(parsed.generator)(parsed);
+}
+
+Scene default_scene() {
+    Scene scene = generate_scene("gen:box?tris=30000&seed=1");
+    scene.name = "default";
+    return scene;
+}
+
+}  // namespace canopy

@@ -1,0 +1,119 @@
+// Scene dispatch by name, flattening of instances into world space, automatic framing.
+#include "scenes/loaders.h"
+
+#include <glm/vec4.hpp>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
+
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <filesystem>
+
+namespace canopy {
+namespace {
+
+std::string lowercase_extension(const std::string& name) {
+    std::string extension = std::filesystem::path(name).extension().string();
+    std::transform(extension.begin(), extension.end(), extension.begin(),
+                   [](unsigned char c) { return char(std::tolower(c)); });
+    return extension;
+}
+
+Scene load_by_kind(const std::string& name) {
+    if (name.empty()) return default_scene();
+    if (name.starts_with("gen:")) return generate_scene(name);
+    const std::string extension = lowercase_extension(name);
+    if (extension == ".json") return load_scene_json(name);
+    if (extension == ".obj") return load_obj(name);
+    throw InputError("'" + name + "': not a scene: expected a .json or .obj file or a gen:NAME spec");
+}
+
+std::vector<Vec3> transformed(const std::vector<Vec3>& positions, const glm::mat4& transform) {
+    std::vector<Vec3> world(positions.size());
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, positions.size(), 4096), [&](const tbb::blocked_range<size_t>& r) {
+        for (size_t i = r.begin(); i < r.end(); ++i) world[i] = Vec3(transform * glm::vec4(positions[i], 1.0f));
+    });
+    return world;
+}
+
+// Writes the mesh's triangles at `out` and returns their bounds.
+BBox emit_triangles(const Mesh& mesh, const std::vector<Vec3>& world, Triangle* out) {
+    return tbb::parallel_reduce(
+        tbb::blocked_range<size_t>(0, mesh.triangles.size(), 4096), BBox{},
+        [&](const tbb::blocked_range<size_t>& r, BBox bounds) {
+            for (size_t i = r.begin(); i < r.end(); ++i) {
+                const glm::uvec3 t = mesh.triangles[i];
+                out[i] = {world[t.x], world[t.y], world[t.z]};
+                bounds.extend(BBox::of(out[i]));
+            }
+            return bounds;
+        },
+        merge);
+}
+
+// A mesh without per-triangle materials, in a scene where other meshes have them, gets a
+// default material so that FlatScene::material covers every triangle.
+void append_materials(const Mesh& mesh, FlatScene& flat) {
+    if (!mesh.triangle_material.empty()) {
+        flat.material.insert(flat.material.end(), mesh.triangle_material.begin(), mesh.triangle_material.end());
+        return;
+    }
+    const auto is_default = [](const Material& m) { return m.name == "(default)"; };
+    auto fallback = std::find_if(flat.materials.begin(), flat.materials.end(), is_default);
+    if (fallback == flat.materials.end()) {
+        flat.materials.push_back({"(default)", Vec3(0.8f)});
+        fallback = flat.materials.end() - 1;
+    }
+    flat.material.insert(flat.material.end(), mesh.triangles.size(), uint32_t(fallback - flat.materials.begin()));
+}
+
+}  // namespace
+
+Scene load_scene(const std::string& name) {
+    Scene scene = load_by_kind(name);
+    if (instanced_triangle_count(scene) == 0)
+        throw InputError("'" + (name.empty() ? std::string("default scene") : name) + "': the scene has no triangles");
+    return scene;
+}
+
+uint64_t instanced_triangle_count(const Scene& scene) {
+    uint64_t count = 0;
+    for (const Instance& instance : scene.instances) count += scene.meshes.at(instance.mesh).triangles.size();
+    return count;
+}
+
+FlatScene flatten(const Scene& scene) {
+    FlatScene flat;
+    flat.triangles.resize(instanced_triangle_count(scene));
+    const bool with_materials = !scene.materials.empty();
+    if (with_materials) {
+        flat.materials = scene.materials;
+        flat.material.reserve(flat.triangles.size());
+    }
+    size_t offset = 0;
+    for (const Instance& instance : scene.instances) {
+        const Mesh& mesh = scene.meshes.at(instance.mesh);
+        const std::vector<Vec3> world = transformed(mesh.positions, instance.transform);
+        flat.bounds.extend(emit_triangles(mesh, world, flat.triangles.data() + offset));
+        if (with_materials) append_materials(mesh, flat);
+        offset += mesh.triangles.size();
+    }
+    return flat;
+}
+
+Camera auto_camera(const BBox& bounds) {
+    Camera camera;
+    camera.target = bounds.center();
+    float diagonal = glm::length(bounds.extent());
+    // A scene collapsed to a point (or with no bounds) still needs the eye off the target.
+    if (!(diagonal > 0.0f) || !std::isfinite(diagonal)) diagonal = 1.0f;
+    if (!std::isfinite(camera.target.x + camera.target.y + camera.target.z)) camera.target = Vec3(0.0f);
+    camera.eye = camera.target + glm::normalize(Vec3(0.0f, 0.35f, 1.0f)) * 1.1f * diagonal;
+    camera.up = Vec3(0.0f, 1.0f, 0.0f);
+    camera.fov_deg = 50.0f;
+    return camera;
+}
+
+}  // namespace canopy

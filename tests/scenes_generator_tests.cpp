@@ -1,0 +1,155 @@
+// Procedural scenes: exact counts, determinism, framing, shape character, spec errors.
+#include "scenes_test_support.h"
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+
+using namespace canopy;
+using canopy::test::input_error_of;
+using Catch::Matchers::Contains;
+
+namespace {
+
+const char* const generators[] = {"box", "cylinders", "surface", "triangles"};
+
+std::string spec(const std::string& generator, uint64_t tris, uint64_t seed) {
+    return "gen:" + generator + "?tris=" + std::to_string(tris) + "&seed=" + std::to_string(seed);
+}
+
+uint64_t triangle_count(const std::string& spec) { return instanced_triangle_count(generate_scene(spec)); }
+
+// Median over triangles of (bounding box surface) / (triangle area): large for long thin
+// slanted triangles, where spatial splits pay; under about 10 for compact ones.
+double median_box_to_area_ratio(const Scene& scene) {
+    std::vector<double> ratios;
+    for (const Triangle& t : flatten(scene).triangles) {
+        const double area = triangle_area(t);
+        if (area > 0) ratios.push_back(BBox::of(t).area() / area);
+    }
+    std::nth_element(ratios.begin(), ratios.begin() + ratios.size() / 2, ratios.end());
+    return ratios[ratios.size() / 2];
+}
+
+}  // namespace
+
+TEST_CASE("generators produce exactly N triangles where the shape allows", "[scenes][generators]") {
+    for (uint64_t n : {1000u, 1001u, 12345u, 100000u}) {
+        INFO("tris=" << n);
+        CHECK(triangle_count(spec("box", n, 1)) == n);
+        CHECK(triangle_count(spec("triangles", n, 1)) == n);
+        // Open cylinders and closed surfaces have an even count: an odd N gives N + 1.
+        CHECK(triangle_count(spec("cylinders", n, 1)) == n + n % 2);
+        CHECK(triangle_count(spec("surface", n, 1)) == n + n % 2);
+    }
+    // Below each shape's minimum, the minimum.
+    CHECK(triangle_count("gen:box?tris=1") == 118);
+    CHECK(triangle_count("gen:cylinders?tris=1") == 6);
+    CHECK(triangle_count("gen:surface?tris=1") == 18);
+    CHECK(triangle_count("gen:triangles?tris=1") == 1);
+    CHECK(triangle_count("gen:box") == 100000);  // the default tris
+}
+
+TEST_CASE("generators are deterministic from the seed", "[scenes][generators]") {
+    for (const char* generator : generators) {
+        INFO(generator);
+        const Mesh first = generate_scene(spec(generator, 5000, 7)).meshes[0];
+        const Mesh again = generate_scene(spec(generator, 5000, 7)).meshes[0];
+        const Mesh other = generate_scene(spec(generator, 5000, 8)).meshes[0];
+        CHECK(first.positions == again.positions);
+        CHECK(first.triangles == again.triangles);
+        CHECK(first.positions != other.positions);
+    }
+    // The stream and its mapping to floats are canopy's own: these numbers hold on every platform.
+    const Mesh one = generate_scene("gen:triangles?tris=1&seed=42").meshes[0];
+    REQUIRE(one.positions.size() == 3);
+    CHECK(one.positions[0] == Vec3(-0x1.3f18fp-2f, -0x1.d90e9ep-1f, 0x1.7910c8p-1f));
+}
+
+TEST_CASE("generated scenes are valid, finite and framed by their camera", "[scenes][generators]") {
+    for (const char* generator : generators) {
+        INFO(generator);
+        const Scene scene = generate_scene(spec(generator, 20000, 3));
+        test::check_mesh_invariants(scene);
+        CHECK(scene.materials.empty());
+        const FlatScene flat = flatten(scene);
+        for (const Triangle& t : flat.triangles)
+            REQUIRE((std::isfinite(t.v0.x + t.v0.y + t.v0.z + t.v1.x + t.v1.y + t.v1.z + t.v2.x + t.v2.y + t.v2.z)));
+        REQUIRE(scene.camera.has_value());
+        const Camera& camera = *scene.camera;
+        CHECK(test::contains(flat.bounds, camera.target));
+        CHECK(glm::length(camera.target - camera.eye) > 0.0f);
+        CHECK((camera.fov_deg > 0.0f && camera.fov_deg < 180.0f));
+        // It looks into the geometry: the bounds centre is near the middle of the view.
+        const Vec3 forward = glm::normalize(camera.target - camera.eye);
+        CHECK(glm::dot(forward, glm::normalize(flat.bounds.center() - camera.eye)) > 0.95f);
+    }
+}
+
+TEST_CASE("gen:box is a room of five walls holding spheres and boxes, each its own object", "[scenes][generators]") {
+    const Scene scene = generate_scene("gen:box?tris=30001&seed=2");
+    const std::vector<Object>& objects = scene.meshes[0].objects;
+    REQUIRE(objects.size() > 7);
+    std::vector<std::string> walls;
+    for (size_t i = 0; i < 5; ++i) walls.push_back(objects[i].name);
+    CHECK(walls == std::vector<std::string>{"floor", "ceiling", "left_wall", "right_wall", "back_wall"});
+    CHECK(objects[4].triangle_count == 3);  // the odd triangle
+    for (size_t i = 5; i < objects.size(); ++i)
+        CHECK((objects[i].name.starts_with("sphere_") || objects[i].name.starts_with("box_")));
+}
+
+TEST_CASE("gen:cylinders has long thin triangles, gen:surface compact ones", "[scenes][generators]") {
+    const double cylinders = median_box_to_area_ratio(generate_scene("gen:cylinders?tris=20000"));
+    const double surface = median_box_to_area_ratio(generate_scene("gen:surface?tris=20000"));
+    CHECK(cylinders > 40.0);  // about 95
+    CHECK(surface < 12.0);    // about 8, as for a randomly oriented equilateral triangle
+    CHECK(generate_scene("gen:cylinders?tris=200000").meshes[0].objects.size() > 1);
+}
+
+TEST_CASE("gen:surface is closed: every edge is shared by exactly two triangles", "[scenes][generators]") {
+    for (uint64_t n : {1000u, 4321u}) {
+        const Mesh mesh = generate_scene(spec("surface", n, 5)).meshes[0];
+        std::map<std::pair<uint32_t, uint32_t>, int> edge_uses;
+        for (const glm::uvec3& t : mesh.triangles)
+            for (int k = 0; k < 3; ++k) {
+                const uint32_t a = t[k], b = t[(k + 1) % 3];
+                ++edge_uses[{std::min(a, b), std::max(a, b)}];
+            }
+        CHECK(std::all_of(edge_uses.begin(), edge_uses.end(), [](const auto& e) { return e.second == 2; }));
+    }
+}
+
+TEST_CASE("default_scene is a small embedded scene that load_scene(\"\") returns", "[scenes][generators]") {
+    const Scene scene = load_scene("");
+    const uint64_t count = instanced_triangle_count(scene);
+    CHECK((count >= 20000 && count <= 50000));
+    CHECK(scene.camera.has_value());
+    CHECK(count == instanced_triangle_count(default_scene()));
+}
+
+TEST_CASE("bad generator specs name the spec and the key", "[scenes][generators][errors]") {
+    struct Case {
+        std::string spec;
+        const char* detail;
+    };
+    const Case cases[] = {
+        {"gen:teapot", "'teapot'"},
+        {"gen:", "unknown generator"},
+        {"gen:box?tris=abc", "tris"},
+        {"gen:box?tris=0", "tris"},
+        {"gen:box?tris=-5", "tris"},
+        {"gen:box?tris=12x", "tris"},
+        {"gen:box?tris=999999999999", "tris"},
+        {"gen:box?seed=", "seed"},
+        {"gen:box?seed=1.5", "seed"},
+        {"gen:box?size=3", "'size'"},
+        {"gen:box?tris=5&tris=6", "twice"},
+        {"gen:box?tris", "'tris'"},
+        {"gen:box?", "key=value"},
+        {"gen:surface?tris=100&", "key=value"},
+    };
+    for (const Case& c : cases) {
+        INFO(c.spec);
+        CHECK_THAT(input_error_of([&] { load_scene(c.spec); }), Contains(c.spec) && Contains(c.detail));
+    }
+}
