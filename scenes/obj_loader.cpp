@@ -1,6 +1,7 @@
-// OBJ loading. tinyobjloader parses groups, faces and the .mtl; before it runs, a scan of the
-// text rejects what tinyobjloader would silently accept (a "nan" or "abc" coordinate becomes 0,
-// an out-of-range face index is dropped with a warning), so every error names its line.
+// OBJ loading. tinyobjloader parses faces and the .mtl; before it runs, a scan of the text
+// records the o/g lines (the objects) and rejects what tinyobjloader would silently accept (a
+// "nan" or "abc" coordinate becomes 0, an out-of-range face index is dropped with a warning),
+// so every error names its line.
 #include "scenes/loaders.h"
 
 #include <tiny_obj_loader.h>
@@ -50,7 +51,14 @@ bool parse_whole(std::string_view text, Number& value) {
     return error == std::errc() && end == text.data() + text.size();
 }
 
-// Validates the 'v' and 'f' lines that canopy uses, counting vertices and faces.
+// An `o` or `g` line: the start of an object, before the file's face number first_face.
+struct GroupStart {
+    std::string name;
+    size_t first_face = 0;
+};
+
+// Validates the 'v' and 'f' lines that canopy uses, counting vertices and faces, and records
+// every 'o'/'g' line (tinyobjloader drops the groups that have no faces).
 class ObjScan {
 public:
     explicit ObjScan(std::string path) : path_(std::move(path)) {}
@@ -74,6 +82,8 @@ public:
     }
 
     size_t vertex_count() const { return vertex_count_; }
+    size_t face_count() const { return face_count_; }
+    const std::vector<GroupStart>& groups() const { return groups_; }
 
 private:
     [[noreturn]] void fail(size_t line, const std::string& problem) const {
@@ -84,6 +94,17 @@ private:
         const std::string_view keyword = next_token(line);
         if (keyword == "v") scan_vertex(line);
         if (keyword == "f") scan_face(line);
+        if (keyword == "o" || keyword == "g") scan_group(line);
+    }
+
+    // The name is the rest of the line, as written ("g a b" names one object "a b").
+    void scan_group(std::string_view rest) {
+        std::string name;
+        for (std::string_view token = next_token(rest); !token.empty(); token = next_token(rest)) {
+            if (!name.empty()) name += ' ';
+            name += token;
+        }
+        groups_.push_back({std::move(name), face_count_});
     }
 
     void scan_vertex(std::string_view rest) {
@@ -133,6 +154,7 @@ private:
     size_t face_count_ = 0;
     int64_t largest_index_ = 0;
     size_t largest_index_line_ = 0;
+    std::vector<GroupStart> groups_;
 };
 
 // Opens .mtl files beside the OBJ. tinyobjloader's own reader splits its base directory at
@@ -217,30 +239,38 @@ void warn_once(const std::string& path, const std::string& tinyobj_warnings,
     std::cerr << message << "\n";
 }
 
-// Turns tinyobjloader's shapes into triangles and objects. An object starts at each o/g group
-// and wherever the material changes inside one, so every object has a single material (and the
-// Cornell box, whose boxes' faces come before their g lines, keeps each box one object).
+// Turns tinyobjloader's faces, in file order, into triangles and objects. Objects follow
+// ../shared/scenes/README.md literally: every o/g line starts one, even one that ends up with
+// no faces (kept with triangle_count 0, so object counts match the README); a material change
+// does not start one. Faces before the first o/g line form an object named after the file.
 class MeshAssembly {
 public:
-    MeshAssembly(Mesh& mesh, std::string default_name, const std::vector<tinyobj::material_t>& materials)
-        : mesh_(mesh), default_name_(std::move(default_name)), materials_(materials) {}
+    MeshAssembly(Mesh& mesh, std::string file_name, const std::vector<GroupStart>& groups, bool has_materials)
+        : mesh_(mesh), file_name_(std::move(file_name)), groups_(groups), has_materials_(has_materials) {}
 
     void add_shape(const tinyobj::shape_t& shape) {
-        const std::string group = shape.name.empty() ? default_name_ : shape.name;
         size_t first_index = 0;
         for (size_t face = 0; face < shape.mesh.num_face_vertices.size(); ++face) {
-            const int material = shape.mesh.material_ids[face];
-            if (face == 0) begin_object(group);
-            else if (material != shape.mesh.material_ids[face - 1]) begin_object(group + "/" + material_name(material));
+            begin_objects_up_to(face_);
             const size_t corners = shape.mesh.num_face_vertices[face];
-            add_face(&shape.mesh.indices[first_index], corners, material);
+            add_face(&shape.mesh.indices[first_index], corners, shape.mesh.material_ids[face]);
             first_index += corners;
+            ++face_;
         }
     }
 
+    // Starts the groups after the last face (empty objects); returns the number of faces read.
+    size_t finish() {
+        begin_objects_up_to(size_t(-1));
+        return face_;
+    }
+
 private:
-    std::string material_name(int material) const {
-        return material < 0 ? "(default)" : materials_[size_t(material)].name;
+    void begin_objects_up_to(size_t face) {
+        if (face == 0 && mesh_.objects.empty() && (groups_.empty() || groups_.front().first_face > 0))
+            begin_object(file_name_);
+        for (; next_group_ < groups_.size() && groups_[next_group_].first_face <= face; ++next_group_)
+            begin_object(groups_[next_group_].name.empty() ? file_name_ : groups_[next_group_].name);
     }
 
     void begin_object(std::string name) {
@@ -252,14 +282,17 @@ private:
         for (size_t k = 1; k + 1 < count; ++k) {
             mesh_.triangles.emplace_back(corners[0].vertex_index, corners[k].vertex_index,
                                          corners[k + 1].vertex_index);
-            if (!materials_.empty()) mesh_.triangle_material.push_back(uint32_t(material));  // -1: patched later
+            if (has_materials_) mesh_.triangle_material.push_back(uint32_t(material));  // -1: patched later
         }
         mesh_.objects.back().triangle_count = uint32_t(mesh_.triangles.size()) - mesh_.objects.back().first_triangle;
     }
 
     Mesh& mesh_;
-    std::string default_name_;
-    const std::vector<tinyobj::material_t>& materials_;
+    std::string file_name_;
+    const std::vector<GroupStart>& groups_;
+    bool has_materials_;
+    size_t face_ = 0;        // faces read so far, over all shapes
+    size_t next_group_ = 0;  // first entry of groups_ not yet begun
 };
 
 // Faces with no (or an unknown) material get a default one, added only when some face needs it.
@@ -291,8 +324,11 @@ Scene load_obj(const std::string& path) {
     const std::vector<float>& coordinates = parsed.attrib.vertices;
     for (size_t i = 0; i < coordinates.size(); i += 3)
         mesh.positions.emplace_back(coordinates[i], coordinates[i + 1], coordinates[i + 2]);
-    MeshAssembly assembly(mesh, scene.name, parsed.materials);
+    MeshAssembly assembly(mesh, scene.name, scan.groups(), !parsed.materials.empty());
     for (const tinyobj::shape_t& shape : parsed.shapes) assembly.add_shape(shape);
+    if (const size_t faces = assembly.finish(); faces != scan.face_count())
+        throw InputError(path + ": tinyobjloader read " + std::to_string(faces) + " faces where the file has " +
+                         std::to_string(scan.face_count()));
     patch_default_materials(mesh, scene.materials);
     scene.instances.push_back({0, glm::mat4(1.0f)});
     return scene;

@@ -30,6 +30,7 @@ struct Material {
     Vec3 kd{0.8f};
 };
 
+// One OBJ o/g group; may be empty (triangle_count 0), kept so counts match the README: a two-level builder skips it.
 struct Object {
     std::string name;
     uint32_t first_triangle = 0;  // range in the mesh's triangle list
@@ -41,7 +42,7 @@ struct Mesh {
     std::vector<Vec3> positions;
     std::vector<glm::uvec3> triangles;      // indices into positions
     std::vector<uint32_t> triangle_material;  // per triangle, index into Scene::materials; empty: none
-    std::vector<Object> objects;             // contiguous, covering all triangles in order
+    std::vector<Object> objects;             // contiguous, covering all triangles in order; some may be empty
 };
 
 struct Instance {

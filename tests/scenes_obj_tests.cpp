@@ -38,7 +38,7 @@ bump absent-bump.png
 
 }  // namespace
 
-TEST_CASE("load_obj splits groups and material changes into objects, in file order", "[scenes][obj]") {
+TEST_CASE("load_obj makes one object per o/g group, in file order", "[scenes][obj]") {
     TempDir dir;
     dir.write("colours.mtl", colours_mtl);
     const Scene scene = load_obj(dir.write("grouped.obj", grouped_obj));
@@ -49,15 +49,51 @@ TEST_CASE("load_obj splits groups and material changes into objects, in file ord
     const Mesh& mesh = scene.meshes[0];
     CHECK(mesh.positions.size() == 5);
     REQUIRE(mesh.triangles.size() == 1 + 2 + 3 + 1);  // triangle, quad, pentagon (fan), triangle
-    REQUIRE(mesh.objects.size() == 4);
+    REQUIRE(mesh.objects.size() == 3);
     CHECK(mesh.objects[0].name == "grouped");  // faces before any group: named after the file
     CHECK(mesh.objects[1].name == "first");
     CHECK(mesh.objects[2].name == "second");
-    CHECK(mesh.objects[3].name == "second/red");
-    CHECK(mesh.objects[2].triangle_count == 3);
+    CHECK(mesh.objects[0].triangle_count == 1);
+    CHECK(mesh.objects[1].triangle_count == 2);
     // Relative indices: -5 .. -1 are vertices 0 .. 4.
     CHECK(mesh.triangles[3] == glm::uvec3(0, 1, 2));
     CHECK(mesh.triangles[5] == glm::uvec3(0, 3, 4));
+}
+
+TEST_CASE("load_obj does not start an object where the material changes inside a group", "[scenes][obj]") {
+    TempDir dir;
+    dir.write("colours.mtl", colours_mtl);
+    const Scene scene = load_obj(dir.write("grouped.obj", grouped_obj));
+    const Mesh& mesh = scene.meshes[0];
+    REQUIRE(mesh.objects.size() == 3);
+    // "second" holds the blue pentagon and the red triangle after it: one object, two materials.
+    CHECK(mesh.objects[2].first_triangle == 3);
+    CHECK(mesh.objects[2].triangle_count == 3 + 1);
+    CHECK(mesh.triangle_material[3] != mesh.triangle_material[6]);
+}
+
+TEST_CASE("load_obj keeps an empty o/g group as an object with 0 triangles", "[scenes][obj]") {
+    TempDir dir;
+    const std::string triangle = "v 0 0 0\nv 1 0 0\nv 0 1 0\n";
+    const Scene scene = load_obj(dir.write("empty_groups.obj", triangle + "o lead\ng a\nf 1 2 3\ng hollow\n"
+                                                                           "o b c\nf 1 2 3\nf 3 2 1\ng\ng tail\n"));
+    test::check_mesh_invariants(scene);
+    struct Expected {
+        const char* name;
+        uint32_t first_triangle, triangle_count;
+    };
+    // No faces before the first group, so no object named after the file there; a bare "g" is
+    // named after the file; empty groups at the start, middle and end are all kept.
+    const Expected expected[] = {{"lead", 0, 0}, {"a", 0, 1},            {"hollow", 1, 0},
+                                 {"b c", 1, 2},  {"empty_groups", 3, 0}, {"tail", 3, 0}};
+    const std::vector<Object>& objects = scene.meshes[0].objects;
+    REQUIRE(objects.size() == std::size(expected));
+    for (size_t i = 0; i < objects.size(); ++i) {
+        INFO("object " << i);
+        CHECK(objects[i].name == expected[i].name);
+        CHECK(objects[i].first_triangle == expected[i].first_triangle);
+        CHECK(objects[i].triangle_count == expected[i].triangle_count);
+    }
 }
 
 TEST_CASE("load_obj reads Kd, gives unmaterialled faces a default, warns once about absent textures",

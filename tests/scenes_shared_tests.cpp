@@ -39,6 +39,24 @@ TEST_CASE("shared OBJ files load with their known triangle counts", "[scenes][sh
     }
 }
 
+TEST_CASE("shared OBJ files have the README's object counts, one per o/g group", "[scenes][shared]") {
+    SKIP_WITHOUT_SHARED_SCENES();
+    const std::pair<const char*, size_t> files[] = {
+        {"crytek-sponza/sponza.obj", 381},
+        {"sibenik/sibenik.obj", 1},
+        {"conference/conference.obj", 1},
+        {"stanford-bunny/stanford-bunny.obj", 1},  // no o/g line: one object named after the file
+        {"stanford-dragon-decimated/dragon.obj", 1},
+        {"armadillo-decimated/armadillo.obj", 1},  // two materials, one group: one object
+        {"cornell-box/CornellBox-Original.obj", 8},
+    };
+    for (const auto& [file, objects] : files) {
+        INFO(file);
+        CHECK(load_obj(shared(file)).meshes[0].objects.size() == objects);
+    }
+    CHECK(load_obj(shared("stanford-bunny/stanford-bunny.obj")).meshes[0].objects[0].name == "stanford-bunny");
+}
+
 TEST_CASE("crytek-sponza has 381 objects", "[scenes][shared]") {
     SKIP_WITHOUT_SHARED_SCENES();
     const Scene scene = load_scene(shared("crytek-sponza/scene.json"));
@@ -47,13 +65,21 @@ TEST_CASE("crytek-sponza has 381 objects", "[scenes][shared]") {
     CHECK(scene.camera.has_value());
 }
 
-TEST_CASE("cornell-box has 8 objects and its .mtl colours", "[scenes][shared]") {
+TEST_CASE("cornell-box has 8 objects, one of them empty, and its .mtl colours", "[scenes][shared]") {
     SKIP_WITHOUT_SHARED_SCENES();
     const Scene scene = load_scene(shared("cornell-box/scene.json"));
     const Mesh& mesh = scene.meshes[0];
+    // One object per g line, as written: the boxes' faces come before their g lines, so
+    // "leftWall" also holds the short box, "shortBox" the tall box, and "tallBox" is empty.
     REQUIRE(mesh.objects.size() == 8);
-    CHECK(mesh.objects[0].name == "floor");
-    CHECK(mesh.objects[7].name == "light");
+    const std::pair<const char*, uint32_t> expected[] = {{"floor", 2},     {"ceiling", 2},  {"backWall", 2},
+                                                         {"rightWall", 2}, {"leftWall", 14}, {"shortBox", 12},
+                                                         {"tallBox", 0},   {"light", 2}};
+    for (size_t i = 0; i < 8; ++i) {
+        INFO("object " << i);
+        CHECK(mesh.objects[i].name == expected[i].first);
+        CHECK(mesh.objects[i].triangle_count == expected[i].second);
+    }
     REQUIRE(mesh.triangle_material.size() == 36);
     const auto not_grey = [](const Material& m) { return m.kd != Vec3(0.8f); };
     CHECK(std::any_of(scene.materials.begin(), scene.materials.end(), not_grey));
