@@ -1,0 +1,40 @@
+#pragma once
+// An allocator for traversal data: large arrays are 2 MiB aligned and advised to use transparent huge
+// pages, because incoherent rays touch nodes all over the tree and 4 KiB pages make every visit a
+// likely TLB miss. Small arrays use the ordinary heap.
+#include <sys/mman.h>
+
+#include <cstddef>
+#include <cstdlib>
+#include <new>
+
+namespace canopy {
+
+template <class T>
+struct HugePageAllocator {
+    using value_type = T;
+    static constexpr size_t kHugePage = size_t(2) << 20;
+
+    HugePageAllocator() = default;
+    template <class U>
+    HugePageAllocator(const HugePageAllocator<U>&) {}
+
+    T* allocate(size_t n) {
+        const size_t bytes = n * sizeof(T);
+        if (bytes < kHugePage) {
+            if (void* p = std::aligned_alloc(64, (bytes + 63) / 64 * 64)) return static_cast<T*>(p);
+            throw std::bad_alloc();
+        }
+        const size_t rounded = (bytes + kHugePage - 1) / kHugePage * kHugePage;
+        void* p = std::aligned_alloc(kHugePage, rounded);
+        if (!p) throw std::bad_alloc();
+        madvise(p, rounded, MADV_HUGEPAGE);  // advice only: without THP it is ignored
+        return static_cast<T*>(p);
+    }
+    void deallocate(T* p, size_t) { std::free(p); }
+
+    template <class U>
+    bool operator==(const HugePageAllocator<U>&) const { return true; }
+};
+
+}  // namespace canopy

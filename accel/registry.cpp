@@ -1,0 +1,24 @@
+#include "accel/builder.h"
+#include "accel/binned_sah.h"
+
+#include <stdexcept>
+
+namespace canopy {
+
+const std::vector<BuilderEntry>& builders() {
+    static const std::vector<BuilderEntry> registry = {
+        {"binned", "parallel binned SAH (Wald 2007), leaves by SAH termination", &build_binned_sah},
+    };
+    return registry;
+}
+
+const BuilderEntry& find_builder(const std::string& name) {
+    std::string known;
+    for (const BuilderEntry& entry : builders()) {
+        if (entry.name == name) return entry;
+        known += (known.empty() ? "" : ", ") + entry.name;
+    }
+    throw std::invalid_argument("unknown builder '" + name + "' (known: " + known + ")");
+}
+
+}  // namespace canopy

@@ -1,0 +1,102 @@
+#include "accel/wide_bvh.h"
+#include "accel/parallel.h"
+
+#include <array>
+
+namespace canopy {
+namespace {
+
+template <int N>
+class Collapser {
+public:
+    Collapser(const Bvh& bvh, WideBvh<N>& out) : bvh_(bvh), out_(out) {}
+
+    void run() {
+        const BvhNode& root = bvh_.nodes[0];
+        if (root.is_leaf()) {
+            uint32_t lone[1] = {0};
+            emit(std::span<const uint32_t>(lone, 1));
+        } else {
+            emit_children_of(0);
+        }
+    }
+
+private:
+    // Emits the wide node whose children come from opening binary node `index`.
+    uint32_t emit_children_of(uint32_t index) {
+        std::array<uint32_t, N> open{};
+        int n = 0;
+        open[n++] = bvh_.nodes[index].index;
+        open[n++] = bvh_.nodes[index].index + 1;
+        while (n < N) {
+            int widest = -1;
+            float widest_area = -1.0f;
+            for (int i = 0; i < n; ++i) {
+                const BvhNode& c = bvh_.nodes[open[i]];
+                if (!c.is_leaf() && c.bounds.half_area() > widest_area) widest = i, widest_area = c.bounds.half_area();
+            }
+            if (widest < 0) break;
+            const uint32_t first = bvh_.nodes[open[widest]].index;
+            open[widest] = first;
+            open[n++] = first + 1;
+        }
+        return emit(std::span<const uint32_t>(open.data(), size_t(n)));
+    }
+
+    uint32_t emit(std::span<const uint32_t> children) {
+        const uint32_t self = uint32_t(out_.nodes.size());
+        out_.nodes.emplace_back();
+        for (int i = 0; i < N; ++i) set_empty(self, i);
+        for (size_t i = 0; i < children.size(); ++i) {
+            const BvhNode& c = bvh_.nodes[children[i]];
+            set_box(self, int(i), c.bounds);
+            if (c.is_leaf()) {
+                out_.nodes[self].child[i] = c.index;
+                out_.nodes[self].count[i] = c.count;
+            } else {
+                const uint32_t child = emit_children_of(children[i]);  // may reallocate nodes
+                out_.nodes[self].child[i] = child;
+                out_.nodes[self].count[i] = 0;
+            }
+        }
+        return self;
+    }
+
+    void set_box(uint32_t node, int i, const BBox& box) {
+        for (int a = 0; a < 3; ++a) {
+            out_.nodes[node].lower[a][i] = box.lower[a];
+            out_.nodes[node].upper[a][i] = box.upper[a];
+        }
+    }
+
+    void set_empty(uint32_t node, int i) {
+        set_box(node, i, BBox{});  // lower = +inf, upper = -inf
+        out_.nodes[node].child[i] = WideNode<N>::kEmpty;
+        out_.nodes[node].count[i] = 0;
+    }
+
+    const Bvh& bvh_;
+    WideBvh<N>& out_;
+};
+
+}  // namespace
+
+template <int N>
+WideBvh<N> collapse(const Bvh& bvh, std::span<const Triangle> triangles) {
+    WideBvh<N> out;
+    if (bvh.nodes.empty()) return out;
+    out.bounds = bvh.nodes[0].bounds;
+    out.nodes.reserve(bvh.nodes.size() / 2 + 1);
+    Collapser<N>(bvh, out).run();
+    // Binary leaves index refs, which are already in leaf order: leaf triangle i is refs[i].
+    out.triangles.resize(bvh.refs.size());
+    parallel::for_each(bvh.refs.size(), 16 * 1024, [&](size_t i) {
+        const Triangle& t = triangles[bvh.refs[i]];
+        out.triangles[i] = {t.v0, bvh.refs[i], t.v1, t.v2};
+    });
+    return out;
+}
+
+template WideBvh<2> collapse<2>(const Bvh&, std::span<const Triangle>);
+
+}  // namespace canopy

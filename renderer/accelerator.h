@@ -1,0 +1,49 @@
+#pragma once
+// An accelerator as the renderer and the benchmark see it: built from a flat scene, then asked to
+// render frames. The virtual call is per frame; inside, each implementation runs the path tracer
+// template over its own tracer type, so no per-ray dispatch is paid.
+#include "renderer/path_tracer.h"
+
+#include <memory>
+#include <optional>
+#include <string>
+
+namespace canopy {
+
+struct AcceleratorReport {
+    std::optional<double> sah;
+    std::optional<uint64_t> nodes, leaves, depth, bytes;
+    std::optional<double> refs_per_tri;
+};
+
+class Accelerator {
+public:
+    virtual ~Accelerator() = default;
+    virtual std::string library() const = 0;  // "canopy" or "embree"
+    virtual std::string builder() const = 0;  // canopy builder name, or null-like "" for embree
+    virtual std::string kernel() const = 0;
+    virtual std::string quality() const = 0;  // embree build quality, "" for canopy
+
+    // Untimed preparation for one build (canopy: PrimRef generation), then the timed build.
+    virtual void prepare() = 0;
+    virtual void build() = 0;
+    virtual uint64_t render(const ShadingScene& scene, const PinholeCamera& camera, uint32_t frame, Image& image,
+                            const std::function<void(float)>& on_tile = {}) const = 0;
+    virtual AcceleratorReport report() const = 0;
+    // One closest-hit query, for tests and tools; frames go through render().
+    virtual Hit trace(const Ray& ray) const = 0;
+};
+
+struct CanopyOptions {
+    std::string builder = "binned";
+    std::string kernel = "bvh2";
+    bool robust = true;  // robust traversal (Ize 2013); false is the measured fast mode
+};
+
+// Throws std::invalid_argument for an unknown builder or kernel.
+std::unique_ptr<Accelerator> make_canopy_accelerator(const FlatScene& scene, const CanopyOptions& options);
+
+// quality: "low", "medium" or "high". threads: 0 for all. Throws std::invalid_argument for another quality.
+std::unique_ptr<Accelerator> make_embree_accelerator(const FlatScene& scene, const std::string& quality, int threads);
+
+}  // namespace canopy

@@ -1,0 +1,179 @@
+#include "renderer/bench.h"
+
+#include "accel/builder.h"
+#include "renderer/accelerator.h"
+
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <fstream>
+#include <numeric>
+#include <stdexcept>
+
+namespace canopy {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double ms_since(Clock::time_point start) {
+    return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
+}
+
+double median(std::vector<double> v) {
+    std::sort(v.begin(), v.end());
+    const size_t n = v.size();
+    return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
+double mean(const std::vector<double>& v) { return std::accumulate(v.begin(), v.end(), 0.0) / double(v.size()); }
+
+struct Entry {
+    std::unique_ptr<Accelerator> accel;
+    std::vector<double> build_ms, frame_ms;
+    uint64_t rays = 0;
+    double image_mean = 0;
+
+    double build_min() const { return *std::min_element(build_ms.begin(), build_ms.end()); }
+    double frame_mean() const { return mean(frame_ms); }
+    double rays_per_frame() const { return double(rays) / double(frame_ms.size()); }
+    std::string label() const {
+        return accel->library() == "embree" ? "embree " + accel->quality()
+                                            : accel->builder() + " " + accel->kernel();
+    }
+};
+
+std::vector<Entry> make_entries(const FlatScene& flat, const BenchOptions& o) {
+    std::vector<Entry> entries;
+    for (const std::string& builder : o.builders)
+        for (const std::string& kernel : o.kernels)
+            entries.push_back({make_canopy_accelerator(flat, {builder, kernel, o.robust})});
+    for (const std::string& quality : o.embree_qualities)
+        entries.push_back({make_embree_accelerator(flat, quality, o.threads)});
+    return entries;
+}
+
+// The Embree row that ratios refer to: MEDIUM when present (like for like with binned SAH).
+const Entry* reference_of(const std::vector<Entry>& entries) {
+    const Entry* ref = nullptr;
+    for (const Entry& e : entries)
+        if (e.accel->library() == "embree" && (!ref || e.accel->quality() == "medium")) ref = &e;
+    return ref;
+}
+
+template <class T>
+nlohmann::json or_null(const std::optional<T>& v) {
+    return v ? nlohmann::json(*v) : nlohmann::json(nullptr);
+}
+
+void print_table(const std::vector<Entry>& entries, uint64_t tris) {
+    const Entry* ref = reference_of(entries);
+    std::printf("\n%-18s %10s %8s %10s %8s %11s %8s %9s %9s %7s %8s %10s",
+                "accelerator", "build ms", "Mprim/s", "frame ms", "Mrays/s", "rays/frame", "SAH", "nodes",
+                "leaves", "refs/t", "MB", "img mean");
+    if (ref) std::printf(" %9s %9s", "build/emb", "frame/emb");
+    std::printf("\n");
+    for (const Entry& e : entries) {
+        const AcceleratorReport r = e.accel->report();
+        const double frame = e.frame_mean();
+        std::printf("%-18s %10.2f %8.2f %10.2f %8.2f %11.0f ", e.label().c_str(), e.build_min(),
+                    double(tris) / e.build_min() / 1e3, frame, e.rays_per_frame() / frame / 1e3, e.rays_per_frame());
+        if (r.sah) std::printf("%8.2f ", *r.sah);
+        else std::printf("%8s ", "-");
+        if (r.nodes) std::printf("%9llu %9llu %7.3f ", (unsigned long long)*r.nodes, (unsigned long long)*r.leaves, *r.refs_per_tri);
+        else std::printf("%9s %9s %7s ", "-", "-", "-");
+        std::printf("%8.1f %10.5f", r.bytes ? double(*r.bytes) / 1e6 : 0.0, e.image_mean);
+        if (ref) std::printf(" %9.3f %9.3f", e.build_min() / ref->build_min(), frame / ref->frame_mean());
+        std::printf("\n");
+    }
+    if (ref) std::printf("ratios against %s, measured in this run\n", ref->label().c_str());
+}
+
+nlohmann::json to_json(const std::vector<Entry>& entries, const BenchOptions& o, uint64_t tris) {
+    nlohmann::json results = nlohmann::json::array();
+    for (const Entry& e : entries) {
+        const AcceleratorReport r = e.accel->report();
+        const bool canopy = e.accel->library() == "canopy";
+        const double frame = e.frame_mean();
+        results.push_back({{"accel", e.accel->library()},
+                           {"builder", canopy ? nlohmann::json(e.accel->builder()) : nlohmann::json(nullptr)},
+                           {"kernel", canopy ? nlohmann::json(e.accel->kernel()) : nlohmann::json(nullptr)},
+                           {"quality", canopy ? nlohmann::json(nullptr) : nlohmann::json(e.accel->quality())},
+                           {"build_ms_min", e.build_min()},
+                           {"build_ms_median", median(e.build_ms)},
+                           {"mprims_per_s", double(tris) / e.build_min() / 1e3},
+                           {"frame_ms_mean", frame},
+                           {"frame_ms_median", median(e.frame_ms)},
+                           {"rays_per_frame", e.rays_per_frame()},
+                           {"mrays_per_s", e.rays_per_frame() / frame / 1e3},
+                           {"sah", or_null(r.sah)},
+                           {"nodes", or_null(r.nodes)},
+                           {"leaves", or_null(r.leaves)},
+                           {"refs_per_tri", or_null(r.refs_per_tri)},
+                           {"bytes", or_null(r.bytes)},
+                           {"image_mean", e.image_mean},
+                           {"time_to_image_ms", {{"1", e.build_min() + frame},
+                                                 {"16", e.build_min() + 16 * frame},
+                                                 {"256", e.build_min() + 256 * frame}}}});
+    }
+    return {{"scene", o.scene}, {"tris", tris}, {"threads", o.threads}, {"width", o.width},
+            {"height", o.height}, {"bounces", o.bounces}, {"results", results}};
+}
+
+}  // namespace
+
+void run_bench(const BenchOptions& o) {
+    auto start = Clock::now();
+    const Scene scene = load_scene(o.scene);
+    const double load_ms = ms_since(start);
+    start = Clock::now();
+    const FlatScene flat = flatten(scene);
+    const double flatten_ms = ms_since(start);
+    const uint64_t tris = flat.triangles.size();
+    start = Clock::now();
+    (void)make_prim_refs(flat.triangles);
+    const double primref_ms = ms_since(start);
+    std::printf("scene %s: %llu triangles; load %.1f ms, flatten %.1f ms, PrimRefs %.1f ms (not in build times)\n",
+                o.scene.c_str(), (unsigned long long)tris, load_ms, flatten_ms, primref_ms);
+    std::printf("protocol: %dx%d, %d bounces, %d builds (min), %d frames (mean) after 1 warm-up, threads %s\n",
+                o.width, o.height, o.bounces, o.builds, o.frames,
+                o.threads ? std::to_string(o.threads).c_str() : "all");
+
+    std::vector<Entry> entries = make_entries(flat, o);
+    for (int round = 0; round < o.builds; ++round) {
+        for (Entry& e : entries) {
+            e.accel->prepare();
+            start = Clock::now();
+            e.accel->build();
+            e.build_ms.push_back(ms_since(start));
+        }
+    }
+
+    FrameSettings settings;
+    settings.width = o.width, settings.height = o.height, settings.max_bounces = o.bounces;
+    settings.material_albedo = o.material_albedo;
+    const ShadingScene shading{flat, settings};
+    const PinholeCamera camera(scene.camera ? *scene.camera : auto_camera(flat.bounds), o.width, o.height);
+    std::vector<Image> images(entries.size(), Image(o.width, o.height));
+    for (size_t i = 0; i < entries.size(); ++i) entries[i].accel->render(shading, camera, 0, images[i]);  // warm-up
+    for (Image& image : images) image.clear();
+    for (int frame = 1; frame <= o.frames; ++frame) {
+        for (size_t i = 0; i < entries.size(); ++i) {
+            start = Clock::now();
+            entries[i].rays += entries[i].accel->render(shading, camera, uint32_t(frame), images[i]);
+            entries[i].frame_ms.push_back(ms_since(start));
+        }
+    }
+    for (size_t i = 0; i < entries.size(); ++i) entries[i].image_mean = images[i].mean(o.frames);
+
+    print_table(entries, tris);
+    if (!o.json_path.empty()) {
+        std::ofstream out(o.json_path);
+        out << to_json(entries, o, tris).dump(2) << "\n";
+        if (!out) throw std::runtime_error(o.json_path + ": cannot write benchmark JSON");
+        std::printf("wrote %s\n", o.json_path.c_str());
+    }
+}
+
+}  // namespace canopy

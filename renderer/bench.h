@@ -1,0 +1,26 @@
+#pragma once
+#include <string>
+#include <vector>
+
+namespace canopy {
+
+struct BenchOptions {
+    std::string scene;
+    std::vector<std::string> builders{"binned"};
+    std::vector<std::string> kernels{"bvh2"};
+    bool robust = true;
+    std::vector<std::string> embree_qualities;  // empty: no Embree rows
+    int builds = 20;
+    int frames = 10;
+    int threads = 0;
+    int width = 1024, height = 768;
+    int bounces = 8;
+    bool material_albedo = false;
+    std::string json_path;
+};
+
+// Runs ../shared/BENCHMARK.md's measurement for every requested accelerator in one process,
+// alternating between them build by build and frame by frame; prints the table, writes JSON.
+void run_bench(const BenchOptions& options);
+
+}  // namespace canopy

@@ -1,0 +1,130 @@
+// Intel Embree 3 as the reference accelerator: same flat triangles, same path tracer, same camera and
+// random numbers as canopy; only the BVH build and traversal are Embree's.
+#include "renderer/accelerator.h"
+
+#include <embree3/rtcore.h>
+
+#include <atomic>
+#include <cstring>
+#include <stdexcept>
+
+namespace canopy {
+namespace {
+
+RTCBuildQuality parse_quality(const std::string& quality) {
+    if (quality == "low") return RTC_BUILD_QUALITY_LOW;
+    if (quality == "medium") return RTC_BUILD_QUALITY_MEDIUM;
+    if (quality == "high") return RTC_BUILD_QUALITY_HIGH;
+    throw std::invalid_argument("unknown Embree quality '" + quality + "' (known: low, medium, high)");
+}
+
+struct EmbreeTracer {
+    RTCScene scene;
+    bool closest(const Ray& ray, Hit& hit) const {
+        RTCIntersectContext context;
+        rtcInitIntersectContext(&context);
+        RTCRayHit rh;
+        rh.ray.org_x = ray.org.x, rh.ray.org_y = ray.org.y, rh.ray.org_z = ray.org.z;
+        rh.ray.dir_x = ray.dir.x, rh.ray.dir_y = ray.dir.y, rh.ray.dir_z = ray.dir.z;
+        rh.ray.tnear = ray.tmin;
+        rh.ray.tfar = ray.tmax;
+        rh.ray.time = 0.0f;
+        rh.ray.mask = 0xffffffffu;
+        rh.ray.id = 0;
+        rh.ray.flags = 0;
+        rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+        rtcIntersect1(scene, &context, &rh);
+        if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return false;
+        hit = {rh.ray.tfar, rh.hit.u, rh.hit.v, rh.hit.primID};
+        return true;
+    }
+};
+
+class EmbreeAccelerator final : public Accelerator {
+public:
+    EmbreeAccelerator(const FlatScene& scene, const std::string& quality, int threads)
+        : quality_name_(quality), quality_(parse_quality(quality)) {
+        const std::string config = threads > 0 ? "threads=" + std::to_string(threads) : "";
+        device_ = rtcNewDevice(config.c_str());
+        if (!device_) throw std::runtime_error("Embree: cannot create a device");
+        rtcSetDeviceMemoryMonitorFunction(device_, &EmbreeAccelerator::monitor, this);
+        // Embree reads vertices with 16-byte loads: one float of padding after the last vertex.
+        vertices_.resize(scene.triangles.size() * 9 + 1);
+        std::memcpy(vertices_.data(), scene.triangles.data(), scene.triangles.size() * sizeof(Triangle));
+        indices_.resize(scene.triangles.size() * 3);
+        for (uint32_t i = 0; i < indices_.size(); ++i) indices_[i] = i;
+        triangle_count_ = scene.triangles.size();
+    }
+
+    ~EmbreeAccelerator() override {
+        if (scene_) rtcReleaseScene(scene_);
+        if (device_) rtcReleaseDevice(device_);
+    }
+
+    std::string library() const override { return "embree"; }
+    std::string builder() const override { return ""; }
+    std::string kernel() const override { return "embree"; }
+    std::string quality() const override { return quality_name_; }
+
+    // A new scene with a new geometry over the shared buffers, so the commit is a full build.
+    void prepare() override {
+        if (scene_) rtcReleaseScene(scene_);
+        scene_ = rtcNewScene(device_);
+        rtcSetSceneBuildQuality(scene_, quality_);
+        RTCGeometry geometry = rtcNewGeometry(device_, RTC_GEOMETRY_TYPE_TRIANGLE);
+        rtcSetGeometryBuildQuality(geometry, quality_);
+        rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, vertices_.data(), 0,
+                                   3 * sizeof(float), triangle_count_ * 3);
+        rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, indices_.data(), 0,
+                                   3 * sizeof(uint32_t), triangle_count_);
+        rtcCommitGeometry(geometry);
+        rtcAttachGeometry(scene_, geometry);
+        rtcReleaseGeometry(geometry);
+        build_bytes_ = 0;
+    }
+
+    void build() override {
+        rtcCommitScene(scene_);
+        if (rtcGetDeviceError(device_) != RTC_ERROR_NONE) throw std::runtime_error("Embree: scene build failed");
+    }
+
+    uint64_t render(const ShadingScene& scene, const PinholeCamera& camera, uint32_t frame, Image& image,
+                    const std::function<void(float)>& on_tile) const override {
+        return render_frame(EmbreeTracer{scene_}, scene, camera, frame, image, on_tile);
+    }
+
+    Hit trace(const Ray& ray) const override {
+        Hit hit;
+        EmbreeTracer{scene_}.closest(ray, hit);
+        return hit;
+    }
+
+    AcceleratorReport report() const override {
+        AcceleratorReport r;
+        r.bytes = uint64_t(std::max<int64_t>(build_bytes_.load(), 0));  // net bytes the build allocated
+        return r;
+    }
+
+private:
+    static bool monitor(void* self, ssize_t bytes, bool) {
+        static_cast<EmbreeAccelerator*>(self)->build_bytes_ += int64_t(bytes);
+        return true;
+    }
+
+    std::string quality_name_;
+    RTCBuildQuality quality_;
+    RTCDevice device_ = nullptr;
+    RTCScene scene_ = nullptr;
+    std::vector<float> vertices_;
+    std::vector<uint32_t> indices_;
+    size_t triangle_count_ = 0;
+    std::atomic<int64_t> build_bytes_{0};
+};
+
+}  // namespace
+
+std::unique_ptr<Accelerator> make_embree_accelerator(const FlatScene& scene, const std::string& quality, int threads) {
+    return std::make_unique<EmbreeAccelerator>(scene, quality, threads);
+}
+
+}  // namespace canopy

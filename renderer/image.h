@@ -1,0 +1,33 @@
+#pragma once
+#include "accel/geometry.h"
+
+#include <string>
+#include <vector>
+
+namespace canopy {
+
+// An RGB float image that accumulates samples; `average()` divides by the samples taken.
+class Image {
+public:
+    Image(int width, int height) : width_(width), height_(height), rgb_(size_t(width) * size_t(height) * 3, 0.0f) {}
+
+    void add(int x, int y, const Vec3& c) {
+        float* p = &rgb_[(size_t(y) * size_t(width_) + size_t(x)) * 3];
+        p[0] += c.x, p[1] += c.y, p[2] += c.z;
+    }
+    void clear() { std::fill(rgb_.begin(), rgb_.end(), 0.0f); }
+    std::vector<float> average(int samples) const;
+    // Mean over all pixels and channels of the average: the protocol's "mean pixel value".
+    double mean(int samples) const;
+    int width() const { return width_; }
+    int height() const { return height_; }
+
+private:
+    int width_, height_;
+    std::vector<float> rgb_;
+};
+
+// Writes a float RGB EXR through OpenImageIO; throws std::runtime_error naming the path on failure.
+void write_exr(const std::string& path, int width, int height, const std::vector<float>& rgb);
+
+}  // namespace canopy

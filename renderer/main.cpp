@@ -1,0 +1,136 @@
+// The canopy command: `render` a scene to EXR, `bench` builders against Embree.
+#include "accel/builder.h"
+#include "renderer/accelerator.h"
+#include "renderer/bench.h"
+
+#include <CLI/CLI.hpp>
+#include <tbb/global_control.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdio>
+#include <memory>
+#include <optional>
+
+namespace {
+
+using namespace canopy;
+
+struct RenderOptions {
+    std::string scene, output = "canopy.exr", builder = "binned", kernel = "bvh2", accel = "canopy";
+    std::string embree_quality = "medium";
+    int spp = 1, threads = 0, bounces = 8;
+    std::vector<int> size{1024, 768};
+    bool material_albedo = false, fast_traversal = false;
+};
+
+std::string builder_names() {
+    std::string names;
+    for (const BuilderEntry& b : builders()) names += (names.empty() ? "" : ", ") + b.name;
+    return names;
+}
+
+void print_progress(float fraction) {
+    const int width = 40, filled = int(fraction * float(width) + 0.5f);
+    std::fprintf(stderr, "\r[%.*s%*s] %3d%%", filled, "========================================", width - filled, "",
+                 int(fraction * 100.0f + 0.5f));
+}
+
+void run_render(const RenderOptions& o) {
+    const Scene scene = load_scene(o.scene);
+    const FlatScene flat = flatten(scene);
+    std::unique_ptr<Accelerator> accel =
+        o.accel == "embree" ? make_embree_accelerator(flat, o.embree_quality, o.threads)
+                            : make_canopy_accelerator(flat, {o.builder, o.kernel, !o.fast_traversal});
+    const auto start = std::chrono::steady_clock::now();
+    accel->prepare();
+    accel->build();
+    const double build_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+
+    FrameSettings settings;
+    settings.width = o.size[0], settings.height = o.size[1], settings.max_bounces = o.bounces;
+    settings.material_albedo = o.material_albedo;
+    const ShadingScene shading{flat, settings};
+    const PinholeCamera camera(scene.camera ? *scene.camera : auto_camera(flat.bounds), o.size[0], o.size[1]);
+    Image image(o.size[0], o.size[1]);
+    const bool terminal = isatty(fileno(stderr));
+    uint64_t rays = 0;
+    const auto render_start = std::chrono::steady_clock::now();
+    for (int s = 0; s < o.spp; ++s) {
+        auto progress = [&](float f) { print_progress((float(s) + f) / float(o.spp)); };
+        rays += accel->render(shading, camera, uint32_t(s), image,
+                              terminal ? std::function<void(float)>(progress) : std::function<void(float)>());
+    }
+    if (terminal) std::fprintf(stderr, "\n");
+    const double render_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - render_start).count();
+    write_exr(o.output, o.size[0], o.size[1], image.average(o.spp));
+    std::printf("%s: %zu triangles, %s build %.1f ms, %d spp in %.2f s (%.2f Mrays/s), mean %.5f -> %s\n",
+                o.scene.empty() ? "default scene" : o.scene.c_str(), flat.triangles.size(),
+                o.accel == "embree" ? ("embree " + o.embree_quality).c_str() : o.builder.c_str(), build_ms, o.spp,
+                render_s, double(rays) / render_s / 1e6, image.mean(o.spp), o.output.c_str());
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    CLI::App app{"canopy: a CPU ray tracer with pluggable BVH builders, measured against Embree"};
+    app.require_subcommand(1);
+    int threads = 0;
+
+    RenderOptions r;
+    CLI::App* render = app.add_subcommand("render", "Render a scene to an EXR");
+    render->add_option("scene", r.scene, "Scene: scene.json, .obj or gen:NAME?tris=N&seed=S (default: embedded scene)");
+    render->add_option("-o,--output", r.output, "Output EXR")->capture_default_str();
+    render->add_option("--spp", r.spp, "Samples (frames) per pixel")->check(CLI::Range(1, 1 << 20))->capture_default_str();
+    render->add_option("--size", r.size, "Width and height")->expected(2)->check(CLI::Range(1, 16384))->capture_default_str();
+    render->add_option("--builder", r.builder, "BVH builder: " + builder_names())->capture_default_str();
+    render->add_option("--kernel", r.kernel, "Traversal kernel: bvh2")->capture_default_str();
+    render->add_option("--accel", r.accel, "canopy or embree")->check(CLI::IsMember({"canopy", "embree"}))->capture_default_str();
+    render->add_option("--embree-quality", r.embree_quality, "low, medium or high")->capture_default_str();
+    render->add_option("--bounces", r.bounces, "Maximum bounces")->check(CLI::Range(0, 1024))->capture_default_str();
+    render->add_option("--threads", threads, "Threads for every library (0: all)")->check(CLI::Range(0, 4096));
+    render->add_flag("--materials", r.material_albedo, "Use the .mtl Kd colours as albedo (protocol: 0.8 grey)");
+    render->add_flag("--fast-traversal", r.fast_traversal, "Unpadded slab test (not robust)");
+
+    BenchOptions b;
+    std::vector<std::string> accels;
+    std::vector<std::string> qualities{"medium"};
+    CLI::App* bench = app.add_subcommand("bench", "Benchmark builders and kernels against Embree (BENCHMARK.md)");
+    bench->add_option("scene", b.scene, "Scene: scene.json, .obj or gen:NAME?tris=N&seed=S")->required();
+    bench->add_option("--builder", b.builders, "Builders: " + builder_names())->delimiter(',')->capture_default_str();
+    bench->add_option("--kernel", b.kernels, "Kernels: bvh2")->delimiter(',')->capture_default_str();
+    bench->add_option("--accel", accels, "Reference accelerators in the same run: embree")->delimiter(',')
+        ->check(CLI::IsMember({"embree"}));
+    bench->add_option("--embree-quality", qualities, "Embree qualities: low, medium, high")->delimiter(',')
+        ->check(CLI::IsMember({"low", "medium", "high"}))->capture_default_str();
+    bench->add_option("--builds", b.builds, "Builds (minimum reported)")->check(CLI::Range(1, 10000))->capture_default_str();
+    bench->add_option("--frames", b.frames, "Timed frames after one warm-up")->check(CLI::Range(1, 10000))->capture_default_str();
+    bench->add_option("--bounces", b.bounces, "Maximum bounces")->check(CLI::Range(0, 1024))->capture_default_str();
+    bench->add_option("--json", b.json_path, "Write results as JSON");
+    bench->add_option("--threads", threads, "Threads for every library (0: all)")->check(CLI::Range(0, 4096));
+    bench->add_flag("--materials", b.material_albedo, "Use the .mtl Kd colours as albedo");
+    bool fast = false;
+    bench->add_flag("--fast-traversal", fast, "Unpadded slab test (not robust)");
+    std::vector<int> bench_size{1024, 768};
+    bench->add_option("--size", bench_size, "Width and height")->expected(2)->check(CLI::Range(1, 16384))->capture_default_str();
+
+    CLI11_PARSE(app, argc, argv);
+    std::optional<tbb::global_control> limit;
+    if (threads > 0) limit.emplace(tbb::global_control::max_allowed_parallelism, size_t(threads));
+    try {
+        if (*render) {
+            r.threads = threads;
+            run_render(r);
+        } else {
+            b.threads = threads;
+            b.robust = !fast;
+            b.width = bench_size[0], b.height = bench_size[1];
+            if (!accels.empty()) b.embree_qualities = qualities;
+            run_bench(b);
+        }
+    } catch (const std::exception& e) {
+        std::fprintf(stderr, "canopy: error: %s\n", e.what());
+        return 1;
+    }
+    return 0;
+}

@@ -1,0 +1,87 @@
+#pragma once
+// The benchmark protocol's diffuse path tracer (../shared/BENCHMARK.md) over TBB tiles, written once
+// for any tracer type with `bool closest(const Ray&, Hit&) const`, so that canopy's kernels and Embree
+// are driven by identical code and identical random numbers.
+#include "renderer/camera.h"
+#include "renderer/image.h"
+#include "renderer/sampling.h"
+#include "scenes/scene.h"
+
+#include <tbb/parallel_for.h>
+
+#include <atomic>
+#include <functional>
+#include <vector>
+
+namespace canopy {
+
+struct FrameSettings {
+    int width = 1024, height = 768;
+    int max_bounces = 8;           // at most max_bounces + 1 closest-hit rays per path
+    bool material_albedo = false;  // protocol: albedo 0.8 everywhere unless the scene asks for Kd
+    float albedo = 0.8f;
+};
+
+struct ShadingScene {
+    const FlatScene& flat;
+    const FrameSettings& settings;
+
+    Vec3 albedo(uint32_t prim) const {
+        if (settings.material_albedo && !flat.material.empty()) return flat.materials[flat.material[prim]].kd;
+        return Vec3(settings.albedo);
+    }
+};
+
+template <class Tracer>
+Vec3 trace_path(const Tracer& tracer, const ShadingScene& scene, Ray ray, Rng& rng, uint64_t& rays) {
+    Vec3 throughput(1.0f), radiance(0.0f);
+    for (int depth = 0; depth <= scene.settings.max_bounces; ++depth) {
+        Hit hit;
+        ++rays;
+        if (!tracer.closest(ray, hit)) {
+            radiance += throughput;  // white sky
+            break;
+        }
+        const Triangle& tri = scene.flat.triangles[hit.prim];
+        Vec3 n = geometric_normal(tri);
+        const float len2 = glm::dot(n, n);
+        n = len2 > 0.0f && std::isfinite(len2) ? n / std::sqrt(len2) : -ray.dir;
+        if (glm::dot(n, ray.dir) > 0.0f) n = -n;
+        throughput *= scene.albedo(hit.prim);
+        if (depth == scene.settings.max_bounces) break;
+        const Vec3 p = tri.v0 + hit.u * (tri.v1 - tri.v0) + hit.v * (tri.v2 - tri.v0);
+        ray = Ray{offset_ray_origin(p, n), cosine_direction(n, rng.next_float(), rng.next_float())};
+    }
+    return radiance;
+}
+
+// Renders one sample per pixel of frame `frame` and adds it to `accumulated`. Returns rays traced.
+// `on_tile` (optional) is called after each tile with the fraction of the frame done.
+template <class Tracer>
+uint64_t render_frame(const Tracer& tracer, const ShadingScene& scene, const PinholeCamera& camera,
+                      uint32_t frame, Image& accumulated, const std::function<void(float)>& on_tile = {}) {
+    constexpr int kTile = 16;
+    const int w = scene.settings.width, h = scene.settings.height;
+    const int tiles_x = (w + kTile - 1) / kTile, tiles_y = (h + kTile - 1) / kTile;
+    const int tiles = tiles_x * tiles_y;
+    std::vector<uint64_t> tile_rays(size_t(tiles), 0);
+    std::atomic<int> done{0};
+    tbb::parallel_for(0, tiles, [&](int tile) {
+        const int x0 = (tile % tiles_x) * kTile, y0 = (tile / tiles_x) * kTile;
+        uint64_t rays = 0;
+        for (int y = y0; y < std::min(y0 + kTile, h); ++y) {
+            for (int x = x0; x < std::min(x0 + kTile, w); ++x) {
+                Rng rng(uint64_t(y) * uint64_t(w) + uint64_t(x), frame);
+                const float u = rng.next_float(), v = rng.next_float();
+                accumulated.add(x, y, trace_path(tracer, scene, camera.generate(x, y, u, v), rng, rays));
+            }
+        }
+        tile_rays[size_t(tile)] = rays;
+        if (on_tile) on_tile(float(done.fetch_add(1) + 1) / float(tiles));
+    });
+    uint64_t total = 0;
+    for (uint64_t r : tile_rays) total += r;
+    return total;
+}
+
+}  // namespace canopy

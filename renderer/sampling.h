@@ -1,0 +1,62 @@
+#pragma once
+// Random numbers, cosine-weighted directions and robust ray offsets for the path tracer.
+#include "accel/geometry.h"
+
+#include <bit>
+#include <cmath>
+#include <cstdint>
+
+namespace canopy {
+
+inline uint64_t splitmix64(uint64_t x) {
+    x += 0x9e3779b97f4a7c15ull;
+    x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ull;
+    x = (x ^ (x >> 27)) * 0x94d049bb133111ebull;
+    return x ^ (x >> 31);
+}
+
+// PCG32 (O'Neill 2014), seeded per pixel and frame so every frame is reproducible on any thread count.
+class Rng {
+public:
+    Rng(uint64_t pixel, uint64_t frame) : state_(splitmix64(pixel ^ splitmix64(frame))), inc_(splitmix64(frame) | 1u) {}
+
+    uint32_t next_u32() {
+        const uint64_t old = state_;
+        state_ = old * 6364136223846793005ull + inc_;
+        const uint32_t xorshifted = uint32_t(((old >> 18u) ^ old) >> 27u);
+        const uint32_t rot = uint32_t(old >> 59u);
+        return (xorshifted >> rot) | (xorshifted << ((32u - rot) & 31u));
+    }
+    float next_float() { return float(next_u32() >> 8) * 0x1p-24f; }  // [0, 1)
+
+private:
+    uint64_t state_, inc_;
+};
+
+// Cosine-weighted direction about unit normal n (Malley's method), with the orthonormal basis of
+// Duff et al. 2017, "Building an Orthonormal Basis, Revisited".
+inline Vec3 cosine_direction(const Vec3& n, float u1, float u2) {
+    const float sign = std::copysign(1.0f, n.z);
+    const float a = -1.0f / (sign + n.z);
+    const float b = n.x * n.y * a;
+    const Vec3 t(1.0f + sign * n.x * n.x * a, sign * b, -sign * n.x);
+    const Vec3 s(b, sign + n.y * n.y * a, -n.y);
+    const float r = std::sqrt(u1), phi = 6.28318530717958f * u2;
+    return glm::normalize(r * std::cos(phi) * t + r * std::sin(phi) * s + std::sqrt(std::max(0.0f, 1.0f - u1)) * n);
+}
+
+// Moves a hit point off its surface along the normal n that faces the new ray: a few ulps scaled by
+// the magnitude of each coordinate, a fixed epsilon near the origin (Wächter and Binder 2019,
+// "A Fast and Robust Method for Avoiding Self-Intersection", Ray Tracing Gems ch. 6).
+inline Vec3 offset_ray_origin(const Vec3& p, const Vec3& n) {
+    constexpr float kOrigin = 1.0f / 32.0f, kFloatScale = 1.0f / 65536.0f, kIntScale = 256.0f;
+    Vec3 out;
+    for (int a = 0; a < 3; ++a) {
+        const int32_t of = int32_t(kIntScale * n[a]);
+        const int32_t bits = std::bit_cast<int32_t>(p[a]) + (p[a] < 0 ? -of : of);
+        out[a] = std::abs(p[a]) < kOrigin ? p[a] + kFloatScale * n[a] : std::bit_cast<float>(bits);
+    }
+    return out;
+}
+
+}  // namespace canopy

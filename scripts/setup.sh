@@ -1,0 +1,21 @@
+#!/usr/bin/env bash
+# Installs the Debian packages canopy needs (only those missing), then configures and builds the
+# Release preset (-O3, host ISA) into build/. Idempotent: a second run installs and rebuilds nothing new.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+packages=(cmake ninja-build g++ libtbb-dev libopenimageio-dev openimageio-tools libopenexr-dev libglm-dev
+          libtinyobjloader-dev catch2 nlohmann-json3-dev libcli11-dev libembree-dev)
+missing=()
+for p in "${packages[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if [ ${#missing[@]} -gt 0 ]; then
+  echo "setup: installing ${missing[*]}"
+  sudo=""; [ "$(id -u)" -ne 0 ] && sudo="sudo"
+  $sudo apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+fi
+
+cmake --preset release >/dev/null
+cmake --build --preset release -j "$(nproc)"

@@ -1,0 +1,136 @@
+#pragma once
+// Test support: brute-force closest hit over all triangles, random test rays, and the comparison
+// rule of the oracle tests (same triangle, or the same distance within 1e-5 where triangles tie).
+#include "accel/builder.h"
+#include "kernels/traverse.h"
+#include "scenes/scene.h"
+
+#include <catch2/catch.hpp>
+#include <tbb/parallel_for.h>
+
+#include <random>
+#include <span>
+#include <string>
+#include <vector>
+
+namespace canopy::test {
+
+inline Hit brute_force_closest(std::span<const Triangle> tris, const Ray& ray) {
+    const WatertightRay wt(ray);
+    Hit hit;
+    hit.t = ray.tmax;
+    for (uint32_t i = 0; i < tris.size(); ++i) wt.intersect(tris[i].v0, tris[i].v1, tris[i].v2, i, ray.tmin, hit);
+    return hit;
+}
+
+inline std::vector<Hit> brute_force_all(std::span<const Triangle> tris, const std::vector<Ray>& rays) {
+    std::vector<Hit> hits(rays.size());
+    tbb::parallel_for(size_t(0), rays.size(), [&](size_t i) { hits[i] = brute_force_closest(tris, rays[i]); });
+    return hits;
+}
+
+// Random rays of four kinds, a quarter each: origin inside or outside the bounds, direction
+// uniformly random or from a point on one triangle towards a point on another.
+inline std::vector<Ray> random_rays(std::span<const Triangle> tris, size_t count, uint64_t seed) {
+    std::mt19937_64 rng(seed);
+    std::uniform_real_distribution<float> unit(0.0f, 1.0f);
+    BBox bounds;
+    for (const Triangle& t : tris) bounds.extend(BBox::of(t));
+    const Vec3 center = bounds.center();
+    const float radius = glm::length(bounds.extent());
+    auto sphere = [&] {
+        const float z = 2.0f * unit(rng) - 1.0f, phi = 6.2831853f * unit(rng), r = std::sqrt(std::max(0.0f, 1 - z * z));
+        return Vec3(r * std::cos(phi), r * std::sin(phi), z);
+    };
+    auto on_triangle = [&] {
+        const Triangle& t = tris[rng() % tris.size()];
+        float a = unit(rng), b = unit(rng);
+        if (a + b > 1.0f) a = 1.0f - a, b = 1.0f - b;
+        return t.v0 + a * (t.v1 - t.v0) + b * (t.v2 - t.v0);
+    };
+    std::vector<Ray> rays;
+    rays.reserve(count);
+    for (size_t i = 0; i < count; ++i) {
+        Ray ray;
+        switch (i % 4) {
+            case 0: ray.org = bounds.lower + Vec3(unit(rng), unit(rng), unit(rng)) * bounds.extent(); ray.dir = sphere(); break;
+            case 1: ray.org = center + radius * sphere(); ray.dir = sphere(); break;
+            case 2: ray.org = center + radius * sphere(); ray.dir = glm::normalize(on_triangle() - ray.org); break;
+            default: {
+                ray.org = on_triangle();
+                const Vec3 to = on_triangle();
+                ray.dir = to == ray.org ? sphere() : glm::normalize(to - ray.org);
+            }
+        }
+        rays.push_back(ray);
+    }
+    return rays;
+}
+
+// Counts disagreements between a kernel's hits and the oracle's; reports the first few.
+inline size_t count_mismatches(const std::vector<Ray>& rays, const std::vector<Hit>& expected,
+                               const std::vector<Hit>& actual, const std::string& what) {
+    size_t mismatches = 0;
+    for (size_t i = 0; i < rays.size(); ++i) {
+        const Hit& e = expected[i];
+        const Hit& a = actual[i];
+        bool same = e.found() == a.found();
+        if (same && e.found() && e.prim != a.prim) same = std::abs(e.t - a.t) <= 1e-5f * std::abs(e.t);
+        if (!same && ++mismatches <= 3) {
+            const Ray& r = rays[i];
+            UNSCOPED_INFO(what << ": ray " << i << " org (" << r.org.x << ", " << r.org.y << ", " << r.org.z
+                               << ") dir (" << r.dir.x << ", " << r.dir.y << ", " << r.dir.z << "): expected prim "
+                               << e.prim << " t " << e.t << ", got prim " << a.prim << " t " << a.t);
+        }
+    }
+    return mismatches;
+}
+
+// Every registered builder with every kernel, as ready-to-trace closures.
+struct KernelUnderTest {
+    std::string name;
+    std::function<Hit(const Ray&)> closest;
+    std::function<bool(const Ray&)> any;
+};
+
+struct BuiltScene {
+    Bvh binary;
+    WideBvh<2> bvh2;
+};
+
+inline BuiltScene build_with(const std::string& builder, std::span<const Triangle> tris) {
+    BuiltScene built;
+    built.binary = find_builder(builder).build(BuildInput{tris, make_prim_refs(tris)}, BuildSettings{});
+    built.bvh2 = collapse<2>(built.binary, tris);
+    return built;
+}
+
+inline std::vector<KernelUnderTest> kernels_of(const BuiltScene& built) {
+    return {{"bvh2",
+             [&](const Ray& r) { Hit h; closest_hit(built.bvh2, r, h); return h; },
+             [&](const Ray& r) { return any_hit(built.bvh2, r); }}};
+}
+
+// Checks every builder x kernel against the oracle on `rays`: closest hits, and any-hit agreement.
+inline void check_against_oracle(std::span<const Triangle> tris, const std::vector<Ray>& rays, const std::string& scene) {
+    const std::vector<Hit> expected = brute_force_all(tris, rays);
+    for (const BuilderEntry& builder : builders()) {
+        const BuiltScene built = build_with(builder.name, tris);
+        for (const KernelUnderTest& kernel : kernels_of(built)) {
+            const std::string what = scene + " / " + builder.name + " / " + kernel.name;
+            std::vector<Hit> actual(rays.size());
+            std::vector<char> any(rays.size());
+            tbb::parallel_for(size_t(0), rays.size(), [&](size_t i) {
+                actual[i] = kernel.closest(rays[i]);
+                any[i] = kernel.any(rays[i]);
+            });
+            CHECK(count_mismatches(rays, expected, actual, what) == 0);
+            size_t any_mismatches = 0;
+            for (size_t i = 0; i < rays.size(); ++i) any_mismatches += bool(any[i]) != expected[i].found();
+            INFO(what << ": any-hit disagreements");
+            CHECK(any_mismatches == 0);
+        }
+    }
+}
+
+}  // namespace canopy::test

@@ -1,0 +1,129 @@
+// Structural invariants of every builder's trees, SAH by eq. 1, thread-count independence.
+#include "oracle.h"
+
+#include <tbb/global_control.h>
+
+#include <cstring>
+
+using namespace canopy;
+using namespace canopy::test;
+
+namespace {
+
+void check_invariants(const Bvh& bvh, std::span<const Triangle> tris, const std::string& what) {
+    INFO(what);
+    REQUIRE(!bvh.nodes.empty());
+    std::vector<uint32_t> seen(tris.size(), 0);
+    std::vector<std::pair<uint32_t, uint32_t>> stack{{0, 0}};
+    size_t reached = 0, bad_bounds = 0;
+    uint32_t depth = 0;
+    while (!stack.empty()) {
+        const auto [index, d] = stack.back();
+        stack.pop_back();
+        ++reached;
+        depth = std::max(depth, d);
+        const BvhNode& node = bvh.nodes[index];
+        auto inside = [&](const BBox& b) {
+            return glm::all(glm::lessThanEqual(node.bounds.lower, b.lower)) &&
+                   glm::all(glm::greaterThanEqual(node.bounds.upper, b.upper));
+        };
+        if (node.is_leaf()) {
+            CHECK(node.count <= BuildSettings{}.max_leaf_size);
+            for (uint32_t i = node.index; i < node.index + node.count; ++i) {
+                ++seen[bvh.refs[i]];
+                bad_bounds += !inside(BBox::of(tris[bvh.refs[i]]));
+            }
+        } else {
+            for (uint32_t c = 0; c < 2; ++c) {
+                bad_bounds += !inside(bvh.nodes[node.index + c].bounds);
+                stack.push_back({node.index + c, d + 1});
+            }
+        }
+    }
+    CHECK(reached == bvh.nodes.size());  // dense: no unreachable nodes
+    CHECK(bad_bounds == 0);
+    CHECK(depth <= kMaxBvhDepth);
+    CHECK(std::count(seen.begin(), seen.end(), 0u) == 0);  // every triangle referenced
+}
+
+}  // namespace
+
+TEST_CASE("every builder's tree is well formed", "[builders]") {
+    for (const char* spec : {"gen:box?tris=20000&seed=1", "gen:cylinders?tris=20000&seed=2", "gen:triangles?tris=5000&seed=3"}) {
+        const FlatScene flat = flatten(load_scene(spec));
+        for (const BuilderEntry& builder : builders()) {
+            const BuiltScene built = build_with(builder.name, flat.triangles);
+            check_invariants(built.binary, flat.triangles, std::string(spec) + " / " + builder.name);
+            const TreeStats stats = tree_stats(built.binary, flat.triangles.size());
+            CHECK(stats.refs_per_triangle >= 1.0);
+            CHECK(built.bvh2.nodes.size() == stats.inner_nodes);
+            CHECK(built.bvh2.triangles.size() == stats.references);
+        }
+    }
+}
+
+TEST_CASE("binned SAH references each triangle once", "[builders]") {
+    const FlatScene flat = flatten(load_scene("gen:surface?tris=10000&seed=4"));
+    const BuiltScene built = build_with("binned", flat.triangles);
+    CHECK(tree_stats(built.binary, flat.triangles.size()).refs_per_triangle == 1.0);
+}
+
+TEST_CASE("pathological inputs keep trees within the depth limit", "[builders]") {
+    std::vector<Triangle> tris;
+    // Triangles at exponentially growing distances: every SAH split peels off very few.
+    for (int i = 0; i < 3000; ++i) {
+        const float x = std::ldexp(1.0f, i % 120 - 60);
+        tris.push_back({Vec3(x, 0, 0), Vec3(x * 1.001f, x * 1e-3f, 0), Vec3(x, 0, x * 1e-3f)});
+    }
+    // Many triangles with one centroid.
+    for (int i = 0; i < 3000; ++i) tris.push_back({Vec3(-1, 0, 0), Vec3(1, 0, 0), Vec3(0, float(i % 7), 0)});
+    for (const BuilderEntry& builder : builders()) {
+        const BuiltScene built = build_with(builder.name, tris);
+        check_invariants(built.binary, tris, builder.name);
+    }
+    check_against_oracle(tris, random_rays(tris, 5000, 3), "pathological");
+}
+
+TEST_CASE("a single triangle and a leaf root are traced", "[builders]") {
+    const std::vector<Triangle> one{{Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0)}};
+    const BuiltScene built = build_with("binned", one);
+    REQUIRE(built.binary.nodes.size() == 1);
+    Hit hit;
+    CHECK(closest_hit(built.bvh2, Ray{{0.25f, 0.25f, 1.0f}, {0, 0, -1}}, hit));
+    CHECK(hit.t == Approx(1.0f));
+    CHECK(!closest_hit(built.bvh2, Ray{{2.0f, 2.0f, 1.0f}, {0, 0, -1}}, hit));
+}
+
+TEST_CASE("SAH follows eq. 1 of the quality-metrics paper", "[metrics]") {
+    // Root [0,2]^3 (half area 12) over leaves [0,1]^3 with 1 triangle and [1,2]^3 with 2 (half area 3 each):
+    // (1.2 * 12 + 1.0 * (1 * 3 + 2 * 3)) / 12 = 1.95
+    Bvh bvh;
+    bvh.nodes = {{{Vec3(0), Vec3(2)}, 1, 0}, {{Vec3(0), Vec3(1)}, 0, 1}, {{Vec3(1), Vec3(2)}, 1, 2}};
+    bvh.refs = {0, 1, 2};
+    CHECK(sah_cost(bvh) == Approx(1.95));
+    CHECK(sah_cost(bvh, {2.0f, 0.5f}) == Approx((2.0 * 12 + 0.5 * 9) / 12));
+    const TreeStats stats = tree_stats(bvh, 3);
+    CHECK(stats.leaves == 2);
+    CHECK(stats.inner_nodes == 1);
+    CHECK(stats.depth == 1);
+    CHECK(stats.refs_per_triangle == 1.0);
+}
+
+TEST_CASE("the tree is the same with 1 and 2 threads", "[builders]") {
+    const FlatScene flat = flatten(load_scene("gen:cylinders?tris=60000&seed=7"));
+    for (const BuilderEntry& builder : builders()) {
+        Bvh one, two;
+        {
+            tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 1);
+            one = build_with(builder.name, flat.triangles).binary;
+        }
+        {
+            tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 2);
+            two = build_with(builder.name, flat.triangles).binary;
+        }
+        INFO(builder.name);
+        REQUIRE(one.nodes.size() == two.nodes.size());
+        CHECK(std::memcmp(one.nodes.data(), two.nodes.data(), one.nodes.size() * sizeof(BvhNode)) == 0);
+        CHECK(one.refs == two.refs);
+    }
+}
