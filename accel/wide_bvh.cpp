@@ -64,8 +64,8 @@ private:
 
     void set_box(uint32_t node, int i, const BBox& box) {
         for (int a = 0; a < 3; ++a) {
-            out_.nodes[node].lower[a][i] = box.lower[a];
-            out_.nodes[node].upper[a][i] = box.upper[a];
+            out_.nodes[node].lower(a, i) = box.lower[a];
+            out_.nodes[node].upper(a, i) = box.upper[a];
         }
     }
 

@@ -11,12 +11,15 @@ namespace canopy {
 template <int N>
 struct alignas(64) WideNode {
     static constexpr uint32_t kEmpty = 0xffffffffu;
-    // Per child: lower[axis][i], upper[axis][i]. Empty slots hold an inverted box (never hit).
-    float lower[3][N];
-    float upper[3][N];
+    // Per child i and axis a: lower bound at planes[a * N + i], upper at planes[(3 + a) * N + i], so a
+    // kernel reaches the near or far plane of an axis by one offset chosen per ray. Empty slots hold an
+    // inverted box (never hit).
+    float planes[6 * N];
     uint32_t child[N];  // inner child: node index; leaf child: first leaf triangle; empty: kEmpty
     uint32_t count[N];  // leaf child: triangle count; inner child or empty: 0
 
+    float& lower(int axis, int i) { return planes[axis * N + i]; }
+    float& upper(int axis, int i) { return planes[(3 + axis) * N + i]; }
     bool is_leaf(int i) const { return count[i] != 0; }
     bool is_empty(int i) const { return child[i] == kEmpty; }
 };

@@ -8,6 +8,7 @@
 #include <immintrin.h>
 
 #include <array>
+#include <bit>
 
 namespace canopy {
 
@@ -18,19 +19,35 @@ enum class Query { Closest, Any };
 
 namespace detail {
 
+// Per-ray slab data: the origin, reciprocal direction, and for each axis the offsets of the near and far
+// planes in WideNode::planes, chosen once by the direction's sign.
+template <int N>
+struct SlabRay {
+    Vec3 org, inv_dir;
+    int near[3], far[3];
+
+    explicit SlabRay(const RayBoxData& r) : org(r.org), inv_dir(r.inv_dir) {
+        for (int a = 0; a < 3; ++a) {
+            const bool positive = !std::signbit(inv_dir[a]);
+            near[a] = (positive ? 0 : 3 * N) + a * N;
+            far[a] = (positive ? 3 * N : 0) + a * N;
+        }
+    }
+};
+
 // Slab test of every child box against [tmin, tmax]; returns a bit mask of the children hit and
 // their entry distances. A NaN from 0 * inf (origin on a slab plane, direction parallel to it) never
 // replaces the running interval, so such rays count as touching the box: conservative.
 template <bool Robust, int N>
-inline uint32_t intersect_children(const WideNode<N>& node, const RayBoxData& r, float tmin, float tmax,
+inline uint32_t intersect_children(const WideNode<N>& node, const SlabRay<N>& r, float tmin, float tmax,
                                    std::array<float, N>& tnear) {
+    const float* planes = node.planes;
     uint32_t mask = 0;
     for (int i = 0; i < N; ++i) {
         float t0 = tmin, far = std::numeric_limits<float>::infinity();
         for (int a = 0; a < 3; ++a) {
-            const bool positive = !std::signbit(r.inv_dir[a]);
-            const float near_a = ((positive ? node.lower[a][i] : node.upper[a][i]) - r.org[a]) * r.inv_dir[a];
-            const float far_a = ((positive ? node.upper[a][i] : node.lower[a][i]) - r.org[a]) * r.inv_dir[a];
+            const float near_a = (planes[r.near[a] + i] - r.org[a]) * r.inv_dir[a];
+            const float far_a = (planes[r.far[a] + i] - r.org[a]) * r.inv_dir[a];
             t0 = near_a > t0 ? near_a : t0;
             far = far_a < far ? far_a : far;
         }
@@ -62,7 +79,7 @@ bool traverse(const WideBvh<N>& bvh, const Ray& ray, Hit& hit) {
     hit = Hit{};
     hit.t = ray.tmax;
     if (bvh.nodes.empty()) return false;
-    const RayBoxData box_ray(ray);
+    const detail::SlabRay<N> box_ray{RayBoxData(ray)};
     const WatertightRay tri_ray(ray);
     std::array<detail::StackEntry, kMaxBvhDepth * (N - 1) + 1> stack;
     int sp = 0;
@@ -72,6 +89,11 @@ bool traverse(const WideBvh<N>& bvh, const Ray& ray, Hit& hit) {
             const WideNode<N>& node = bvh.nodes[current.child];
             std::array<float, N> tnear;
             uint32_t mask = detail::intersect_children<Robust, N>(node, box_ray, ray.tmin, hit.t, tnear);
+            if (mask && (mask & (mask - 1)) == 0) {  // one child hit: go there directly
+                const int only = std::countr_zero(mask);
+                current = {node.child[only], node.count[only], tnear[only]};
+                continue;
+            }
             if (N == 2 && mask == 3) {  // binary: go to the nearer child, keep the farther
                 const int near = tnear[1] < tnear[0];
                 stack[sp++] = {node.child[1 - near], node.count[1 - near], tnear[1 - near]};
