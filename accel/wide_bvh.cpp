@@ -51,8 +51,10 @@ private:
             const BvhNode& c = bvh_.nodes[children[i]];
             set_box(self, int(i), c.bounds);
             if (c.is_leaf()) {
-                out_.nodes[self].child[i] = c.index;
+                out_.nodes[self].child[i] = leaf_entries_;
                 out_.nodes[self].count[i] = c.count;
+                leaf_refs_.push_back({leaf_entries_, c.index, c.count});
+                leaf_entries_ += leaf_entries(N, c.count);
             } else {
                 const uint32_t child = emit_children_of(children[i]);  // may reallocate nodes
                 out_.nodes[self].child[i] = child;
@@ -75,9 +77,42 @@ private:
         out_.nodes[node].count[i] = 0;
     }
 
+public:
+    struct LeafRun {
+        uint32_t first_entry, first_ref, count;
+    };
+    std::vector<LeafRun> leaf_refs_;  // every leaf in emission order, for filling `leaves` in parallel
+    uint32_t leaf_entries_ = 0;
+
+private:
     const Bvh& bvh_;
     WideBvh<N>& out_;
 };
+
+void fill_leaf(LeafTriangle* out, const Bvh& bvh, std::span<const Triangle> triangles, uint32_t first_ref,
+               uint32_t count) {
+    for (uint32_t i = 0; i < count; ++i) {
+        const uint32_t prim = bvh.refs[first_ref + i];
+        const Triangle& t = triangles[prim];
+        out[i] = {t.v0, prim, t.v1, t.v2};
+    }
+}
+
+void fill_leaf(TriangleBlock4* out, const Bvh& bvh, std::span<const Triangle> triangles, uint32_t first_ref,
+               uint32_t count) {
+    for (uint32_t b = 0; b < leaf_entries(4, count); ++b) {
+        TriangleBlock4& block = out[b];
+        for (int lane = 0; lane < 4; ++lane) {
+            const uint32_t i = b * 4 + uint32_t(lane);
+            const uint32_t prim = i < count ? bvh.refs[first_ref + i] : TriangleBlock4::kNone;
+            const Triangle t = i < count ? triangles[prim] : Triangle{Vec3(0), Vec3(0), Vec3(0)};
+            const Vec3* vertices[3] = {&t.v0, &t.v1, &t.v2};
+            for (int v = 0; v < 3; ++v)
+                for (int a = 0; a < 3; ++a) block.v[v][a][lane] = (*vertices[v])[a];
+            block.prim[lane] = prim;
+        }
+    }
+}
 
 }  // namespace
 
@@ -87,16 +122,18 @@ WideBvh<N> collapse(const Bvh& bvh, std::span<const Triangle> triangles) {
     if (bvh.nodes.empty()) return out;
     out.bounds = bvh.nodes[0].bounds;
     out.nodes.reserve(bvh.nodes.size() / 2 + 1);
-    Collapser<N>(bvh, out).run();
-    // Binary leaves index refs, which are already in leaf order: leaf triangle i is refs[i].
-    out.triangles.resize(bvh.refs.size());
-    parallel::for_each(bvh.refs.size(), 16 * 1024, [&](size_t i) {
-        const Triangle& t = triangles[bvh.refs[i]];
-        out.triangles[i] = {t.v0, bvh.refs[i], t.v1, t.v2};
+    Collapser<N> collapser(bvh, out);
+    collapser.run();
+    out.leaves.resize(collapser.leaf_entries_);
+    const auto& runs = collapser.leaf_refs_;
+    parallel::for_each(runs.size(), 4 * 1024, [&](size_t i) {
+        fill_leaf(&out.leaves[runs[i].first_entry], bvh, triangles, runs[i].first_ref, runs[i].count);
     });
     return out;
 }
 
 template WideBvh<2> collapse<2>(const Bvh&, std::span<const Triangle>);
+template WideBvh<4> collapse<4>(const Bvh&, std::span<const Triangle>);
+template WideBvh<8> collapse<8>(const Bvh&, std::span<const Triangle>);
 
 }  // namespace canopy

@@ -1,10 +1,12 @@
 #pragma once
 // Traversal layout: N-wide nodes holding their children's boxes in SoA, collapsed from any builder's
-// binary BVH, with leaf triangles copied in leaf order so a leaf is one contiguous run.
+// binary BVH, with leaf triangles copied in leaf order so a leaf is one contiguous run (N = 2) or one
+// run of 4-wide SoA blocks (N = 4, 8).
 #include "accel/bvh.h"
 #include "accel/huge_page_allocator.h"
 
 #include <span>
+#include <type_traits>
 
 namespace canopy {
 
@@ -23,7 +25,7 @@ struct alignas(64) WideNode {
     bool is_leaf(int i) const { return count[i] != 0; }
     bool is_empty(int i) const { return child[i] == kEmpty; }
 };
-static_assert(sizeof(WideNode<2>) == 64);
+static_assert(sizeof(WideNode<2>) == 64 && sizeof(WideNode<4>) == 128 && sizeof(WideNode<8>) == 256);
 
 // A triangle as the intersector wants it, with the id of the scene triangle it came from.
 struct LeafTriangle {
@@ -32,13 +34,32 @@ struct LeafTriangle {
     Vec3 v1, v2;
 };
 
+// Four triangles in SoA for the SIMD intersector: v[vertex][axis][lane]. Lanes past a leaf's end hold a
+// degenerate triangle at the origin (never hit) and prim kNone.
+struct alignas(16) TriangleBlock4 {
+    static constexpr uint32_t kNone = 0xffffffffu;
+    float v[3][3][4];
+    uint32_t prim[4];
+};
+static_assert(sizeof(TriangleBlock4) == 160);
+
+// Binary nodes are traced with the scalar intersector, one LeafTriangle at a time; wide nodes with the SIMD
+// one, four triangles per TriangleBlock4. A leaf child's `child` indexes `leaves`; its `count` is always
+// the number of triangles.
+template <int N>
+using LeafOf = std::conditional_t<(N > 2), TriangleBlock4, LeafTriangle>;
+
+inline uint32_t leaf_entries(int width, uint32_t triangles) { return width > 2 ? (triangles + 3) / 4 : triangles; }
+
 template <int N>
 struct WideBvh {
+    static constexpr int kWidth = N;
+    using Leaf = LeafOf<N>;
     std::vector<WideNode<N>, HugePageAllocator<WideNode<N>>> nodes;  // nodes[0] is the root, never a leaf
-    std::vector<LeafTriangle, HugePageAllocator<LeafTriangle>> triangles;
+    std::vector<Leaf, HugePageAllocator<Leaf>> leaves;
     BBox bounds;
 
-    uint64_t bytes() const { return nodes.size() * sizeof(WideNode<N>) + triangles.size() * sizeof(LeafTriangle); }
+    uint64_t bytes() const { return nodes.size() * sizeof(WideNode<N>) + leaves.size() * sizeof(Leaf); }
 };
 
 // SAH-driven collapse (Ganestam and Doggett 2016, sec. 4.2): a node's children are its binary

@@ -1,8 +1,11 @@
 #pragma once
-// Stack-based traversal of a WideBvh<N>: children tested in one pass, visited near to far.
-// Robust = true pads the far slab distance so rounding never culls a box the ray crosses
-// (Ize 2013, "Robust BVH Ray Traversal"); Robust = false is the fast mode.
+// Stack-based traversal of a WideBvh<N>, one template for every width: children tested in one pass (scalar
+// for N = 2, SSE for N = 4, AVX for N = 8), visited near to far. Robust = true pads the far slab distance
+// so rounding never culls a box the ray crosses (Ize 2013, "Robust BVH Ray Traversal"); Robust = false is
+// the fast mode. A Counter other than NoCount records inner nodes, leaves and triangles visited; with
+// NoCount the calls compile to nothing.
 #include "accel/wide_bvh.h"
+#include "kernels/simd.h"
 #include "kernels/watertight.h"
 
 #include <immintrin.h>
@@ -17,6 +20,19 @@ constexpr float kRobustFarScale = 1.0f + 2.0f * (3.0f * 0x1p-24f) / (1.0f - 3.0f
 
 enum class Query { Closest, Any };
 
+struct NoCount {
+    void inner() {}
+    void leaf() {}
+    void triangles(uint32_t) {}
+};
+
+struct TraversalCounts {
+    uint64_t inner_nodes = 0, leaf_nodes = 0, triangle_tests = 0;
+    void inner() { ++inner_nodes; }
+    void leaf() { ++leaf_nodes; }
+    void triangles(uint32_t n) { triangle_tests += n; }
+};
+
 namespace detail {
 
 // Per-ray slab data: the origin, reciprocal direction, and for each axis the offsets of the near and far
@@ -26,7 +42,7 @@ struct SlabRay {
     Vec3 org, inv_dir;
     int near[3], far[3];
 
-    explicit SlabRay(const RayBoxData& r) : org(r.org), inv_dir(r.inv_dir) {
+    explicit SlabRay(const Ray& ray) : org(ray.org), inv_dir(RayBoxData(ray).inv_dir) {
         for (int a = 0; a < 3; ++a) {
             const bool positive = !std::signbit(inv_dir[a]);
             near[a] = (positive ? 0 : 3 * N) + a * N;
@@ -35,28 +51,43 @@ struct SlabRay {
     }
 };
 
-// Slab test of every child box against [tmin, tmax]; returns a bit mask of the children hit and
-// their entry distances. A NaN from 0 * inf (origin on a slab plane, direction parallel to it) never
-// replaces the running interval, so such rays count as touching the box: conservative.
+// Slab test of every child box against [tmin, tmax]; returns a bit mask of the children hit and their entry
+// distances. A NaN from 0 * inf (origin on a slab plane, direction parallel to it) never replaces the
+// running interval, so such rays count as touching the box: conservative. The SIMD and scalar forms
+// compute the same values.
 template <bool Robust, int N>
 inline uint32_t intersect_children(const WideNode<N>& node, const SlabRay<N>& r, float tmin, float tmax,
                                    std::array<float, N>& tnear) {
     const float* planes = node.planes;
-    uint32_t mask = 0;
-    for (int i = 0; i < N; ++i) {
-        float t0 = tmin, far = std::numeric_limits<float>::infinity();
-        for (int a = 0; a < 3; ++a) {
-            const float near_a = (planes[r.near[a] + i] - r.org[a]) * r.inv_dir[a];
-            const float far_a = (planes[r.far[a] + i] - r.org[a]) * r.inv_dir[a];
-            t0 = near_a > t0 ? near_a : t0;
-            far = far_a < far ? far_a : far;
+    if constexpr (N == 2) {
+        uint32_t mask = 0;
+        for (int i = 0; i < N; ++i) {
+            float t0 = tmin, far = std::numeric_limits<float>::infinity();
+            for (int a = 0; a < 3; ++a) {
+                const float near_a = (planes[r.near[a] + i] - r.org[a]) * r.inv_dir[a];
+                const float far_a = (planes[r.far[a] + i] - r.org[a]) * r.inv_dir[a];
+                t0 = near_a > t0 ? near_a : t0;
+                far = far_a < far ? far_a : far;
+            }
+            if constexpr (Robust) far *= kRobustFarScale;  // padding is monotone: scaling the minimum suffices
+            const float t1 = far < tmax ? far : tmax;
+            tnear[i] = t0;
+            mask |= uint32_t(t0 <= t1) << i;
         }
-        if constexpr (Robust) far *= kRobustFarScale;  // padding is monotone: scaling the minimum suffices
-        const float t1 = far < tmax ? far : tmax;
-        tnear[i] = t0;
-        mask |= uint32_t(t0 <= t1) << i;
+        return mask;
+    } else {
+        using S = simd::Simd<N>;
+        typename S::F t0 = S::set1(tmin), far = S::set1(std::numeric_limits<float>::infinity());
+        for (int a = 0; a < 3; ++a) {
+            const typename S::F org = S::set1(r.org[a]), inv = S::set1(r.inv_dir[a]);
+            t0 = S::max(S::mul(S::sub(S::load(planes + r.near[a]), org), inv), t0);
+            far = S::min(S::mul(S::sub(S::load(planes + r.far[a]), org), inv), far);
+        }
+        if constexpr (Robust) far = S::mul(far, S::set1(kRobustFarScale));
+        const typename S::F t1 = S::min(far, S::set1(tmax));
+        S::store(tnear.data(), t0);
+        return S::le_mask(t0, t1);
     }
-    return mask;
 }
 
 struct StackEntry {
@@ -67,25 +98,45 @@ struct StackEntry {
 template <int N>
 inline void prefetch(const WideBvh<N>& bvh, const StackEntry& e) {
     if (e.count == 0) _mm_prefetch(reinterpret_cast<const char*>(&bvh.nodes[e.child]), _MM_HINT_T0);
-    else _mm_prefetch(reinterpret_cast<const char*>(&bvh.triangles[e.child]), _MM_HINT_T0);
+    else _mm_prefetch(reinterpret_cast<const char*>(&bvh.leaves[e.child]), _MM_HINT_T0);
+}
+
+// Intersects a leaf's triangles; true when a hit was recorded.
+template <int N, class Counter>
+inline bool intersect_leaf(const WideBvh<N>& bvh, const StackEntry& leaf, const WatertightRay& tri_ray, float tmin,
+                           Hit& hit, Counter& counter) {
+    counter.leaf();
+    counter.triangles(leaf.count);
+    bool found = false;
+    if constexpr (N == 2) {
+        for (uint32_t i = leaf.child; i < leaf.child + leaf.count; ++i) {
+            const LeafTriangle& t = bvh.leaves[i];
+            found |= tri_ray.intersect(t.v0, t.v1, t.v2, t.prim, tmin, hit);
+        }
+    } else {
+        const uint32_t end = leaf.child + leaf_entries(N, leaf.count);
+        for (uint32_t b = leaf.child; b < end; ++b) found |= tri_ray.intersect4(bvh.leaves[b], tmin, hit) >= 0;
+    }
+    return found;
 }
 
 }  // namespace detail
 
-// Closest hit (Query::Closest) or any hit (Query::Any) in (ray.tmin, ray.tmax]. For Any, `hit` holds
-// the first hit found, not the closest.
-template <Query Q, bool Robust = true, int N>
-bool traverse(const WideBvh<N>& bvh, const Ray& ray, Hit& hit) {
+// Closest hit (Query::Closest) or any hit (Query::Any) in (ray.tmin, ray.tmax]. For Any, `hit` holds the
+// first hit found, not the closest.
+template <Query Q, bool Robust = true, int N, class Counter = NoCount>
+bool traverse(const WideBvh<N>& bvh, const Ray& ray, Hit& hit, Counter&& counter = {}) {
     hit = Hit{};
     hit.t = ray.tmax;
     if (bvh.nodes.empty()) return false;
-    const detail::SlabRay<N> box_ray{RayBoxData(ray)};
+    const detail::SlabRay<N> box_ray(ray);
     const WatertightRay tri_ray(ray);
     std::array<detail::StackEntry, kMaxBvhDepth * (N - 1) + 1> stack;
     int sp = 0;
     detail::StackEntry current{0, 0, ray.tmin};
     for (;;) {
         if (current.count == 0) {
+            counter.inner();
             const WideNode<N>& node = bvh.nodes[current.child];
             std::array<float, N> tnear;
             uint32_t mask = detail::intersect_children<Robust, N>(node, box_ray, ray.tmin, hit.t, tnear);
@@ -94,19 +145,20 @@ bool traverse(const WideBvh<N>& bvh, const Ray& ray, Hit& hit) {
                 current = {node.child[only], node.count[only], tnear[only]};
                 continue;
             }
-            if (N == 2 && mask == 3) {  // binary: go to the nearer child, keep the farther
-                const int near = tnear[1] < tnear[0];
-                stack[sp++] = {node.child[1 - near], node.count[1 - near], tnear[1 - near]};
-                prefetch(bvh, stack[sp - 1]);  // its fetch overlaps the near subtree's work
+            if (mask && std::popcount(mask) == 2) {  // two: go to the nearer, keep the farther
+                const int a = std::countr_zero(mask), b = std::countr_zero(mask & (mask - 1));
+                const int near = tnear[b] < tnear[a] ? b : a, far = near == a ? b : a;
+                stack[sp++] = {node.child[far], node.count[far], tnear[far]};
+                detail::prefetch(bvh, stack[sp - 1]);  // its fetch overlaps the near subtree's work
                 current = {node.child[near], node.count[near], tnear[near]};
                 continue;
             }
             if (mask) {
                 // Push all hit children far to near by insertion into the stack top, then take the nearest.
                 const int base = sp;
-                for (int i = 0; mask; ++i, mask >>= 1) {
-                    if (!(mask & 1)) continue;
-                    detail::StackEntry e{node.child[i], node.count[i], tnear[i]};
+                for (; mask; mask &= mask - 1) {
+                    const int i = std::countr_zero(mask);
+                    const detail::StackEntry e{node.child[i], node.count[i], tnear[i]};
                     int j = sp++;
                     for (; j > base && stack[j - 1].tnear < e.tnear; --j) stack[j] = stack[j - 1];
                     stack[j] = e;
@@ -114,11 +166,8 @@ bool traverse(const WideBvh<N>& bvh, const Ray& ray, Hit& hit) {
                 current = stack[--sp];
                 continue;
             }
-        } else {
-            for (uint32_t i = current.child; i < current.child + current.count; ++i) {
-                const LeafTriangle& t = bvh.triangles[i];
-                if (tri_ray.intersect(t.v0, t.v1, t.v2, t.prim, ray.tmin, hit) && Q == Query::Any) return true;
-            }
+        } else if (detail::intersect_leaf(bvh, current, tri_ray, ray.tmin, hit, counter) && Q == Query::Any) {
+            return true;
         }
         do {
             if (sp == 0) return hit.found();

@@ -3,7 +3,12 @@
 // Intersection"): the ray is made the +z axis by a permutation and a shear, so the three 2D edge
 // functions of neighbouring triangles are computed from identical inputs and a ray through a
 // shared edge or vertex hits at least one of them.
+#include "accel/wide_bvh.h"
 #include "kernels/ray.h"
+
+#include <immintrin.h>
+
+#include <bit>
 
 #include <cmath>
 #include <utility>
@@ -61,7 +66,64 @@ public:
         return true;
     }
 
+#if defined(__FMA__)
+    // Four triangles at once, operation for operation the scalar test above, so every kernel finds the same
+    // hit at the same distance. Returns the lane hit (the nearest), or -1.
+    int intersect4(const TriangleBlock4& block, float tmin, Hit& hit) const {
+        const __m128 sx = _mm_set1_ps(sx_), sy = _mm_set1_ps(sy_), sz = _mm_set1_ps(sz_);
+        __m128 x[3], y[3], z[3];  // sheared coordinates of the three vertices
+        for (int v = 0; v < 3; ++v) {
+            const __m128 px = _mm_sub_ps(_mm_load_ps(block.v[v][kx_]), _mm_set1_ps(org_[kx_]));
+            const __m128 py = _mm_sub_ps(_mm_load_ps(block.v[v][ky_]), _mm_set1_ps(org_[ky_]));
+            const __m128 pz = _mm_sub_ps(_mm_load_ps(block.v[v][kz_]), _mm_set1_ps(org_[kz_]));
+            x[v] = _mm_sub_ps(px, _mm_mul_ps(sx, pz));
+            y[v] = _mm_sub_ps(py, _mm_mul_ps(sy, pz));
+            z[v] = _mm_mul_ps(sz, pz);
+        }
+        const __m128 u = difference_of_products4(x[2], y[1], y[2], x[1]);
+        const __m128 v = difference_of_products4(x[0], y[2], y[0], x[2]);
+        const __m128 w = difference_of_products4(x[1], y[0], y[1], x[0]);
+        const __m128 zero = _mm_setzero_ps();
+        const __m128 any_negative = _mm_or_ps(_mm_or_ps(_mm_cmplt_ps(u, zero), _mm_cmplt_ps(v, zero)), _mm_cmplt_ps(w, zero));
+        const __m128 any_positive = _mm_or_ps(_mm_or_ps(_mm_cmpgt_ps(u, zero), _mm_cmpgt_ps(v, zero)), _mm_cmpgt_ps(w, zero));
+        const __m128 det = _mm_add_ps(_mm_add_ps(u, v), w);
+        const __m128 t_scaled = _mm_add_ps(_mm_add_ps(_mm_mul_ps(u, z[0]), _mm_mul_ps(v, z[1])), _mm_mul_ps(w, z[2]));
+        const __m128 sign_bit = _mm_and_ps(det, _mm_set1_ps(-0.0f));
+        const __m128 abs_det = _mm_andnot_ps(_mm_set1_ps(-0.0f), det);
+        const __m128 ts = _mm_xor_ps(t_scaled, sign_bit);
+        const __m128 inv_det = _mm_div_ps(_mm_set1_ps(1.0f), det);
+        const __m128 t = _mm_mul_ps(t_scaled, inv_det);
+        const __m128 t_min = _mm_set1_ps(tmin), t_max = _mm_set1_ps(hit.t);
+        __m128 valid = _mm_andnot_ps(_mm_and_ps(any_negative, any_positive), _mm_cmpneq_ps(det, zero));
+        valid = _mm_and_ps(valid, _mm_cmpgt_ps(ts, _mm_mul_ps(t_min, abs_det)));
+        valid = _mm_and_ps(valid, _mm_cmple_ps(ts, _mm_mul_ps(t_max, abs_det)));
+        valid = _mm_and_ps(valid, _mm_and_ps(_mm_cmpgt_ps(t, t_min), _mm_cmple_ps(t, t_max)));
+        valid = _mm_and_ps(valid, _mm_cmplt_ps(t, _mm_set1_ps(std::numeric_limits<float>::infinity())));
+        int mask = _mm_movemask_ps(valid);
+        if (!mask) return -1;
+        alignas(16) float ts_lane[4], us[4], vs[4];
+        _mm_store_ps(ts_lane, t);
+        _mm_store_ps(us, _mm_mul_ps(v, inv_det));
+        _mm_store_ps(vs, _mm_mul_ps(w, inv_det));
+        int best = std::countr_zero(unsigned(mask));
+        for (mask &= mask - 1; mask; mask &= mask - 1) {
+            const int lane = std::countr_zero(unsigned(mask));
+            if (ts_lane[lane] <= ts_lane[best]) best = lane;  // ties go to the later triangle, as in the scalar loop
+        }
+        hit = {ts_lane[best], us[best], vs[best], block.prim[best]};
+        return best;
+    }
+#endif
+
 private:
+#if defined(__FMA__)
+    static __m128 difference_of_products4(__m128 a, __m128 b, __m128 c, __m128 d) {
+        const __m128 cd = _mm_mul_ps(c, d);
+        const __m128 error = _mm_fnmadd_ps(c, d, cd);
+        return _mm_add_ps(_mm_fmsub_ps(a, b, cd), error);
+    }
+#endif
+
     Vec3 org_;
     int kx_, ky_, kz_;
     float sx_, sy_, sz_;

@@ -36,7 +36,7 @@ public:
 
 struct CanopyOptions {
     std::string builder = "binned";
-    std::string kernel = "bvh2";
+    std::string kernel = "auto";  // bvh2, bvh4, bvh8, or auto: the widest this build and CPU run
     bool robust = true;  // robust traversal (Ize 2013); false is the measured fast mode
 };
 

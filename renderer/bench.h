@@ -7,7 +7,7 @@ namespace canopy {
 struct BenchOptions {
     std::string scene;
     std::vector<std::string> builders{"binned"};
-    std::vector<std::string> kernels{"bvh2"};
+    std::vector<std::string> kernels{"auto"};
     bool robust = true;
     std::vector<std::string> embree_qualities;  // empty: no Embree rows
     int builds = 20;

@@ -1,8 +1,9 @@
 #include "accel/builder.h"
+#include "kernels/dispatch.h"
 #include "kernels/traverse.h"
 #include "renderer/accelerator.h"
 
-#include <stdexcept>
+#include <variant>
 
 namespace canopy {
 namespace {
@@ -13,53 +14,73 @@ struct CanopyTracer {
     bool closest(const Ray& ray, Hit& hit) const { return closest_hit<Robust>(bvh, ray, hit); }
 };
 
+using AnyLayout = std::variant<WideBvh<2>, WideBvh<4>, WideBvh<8>>;
+
+template <int N>
+void collapse_into(AnyLayout& layout, const Bvh& bvh, std::span<const Triangle> triangles) {
+    if constexpr (kernel_compiled(N)) layout = collapse<N>(bvh, triangles);
+}
+
 class CanopyAccelerator final : public Accelerator {
 public:
     CanopyAccelerator(const FlatScene& scene, const CanopyOptions& options)
-        : scene_(scene), options_(options), builder_(find_builder(options.builder)) {
-        if (options.kernel != "bvh2")
-            throw std::invalid_argument("unknown kernel '" + options.kernel + "' (known: bvh2)");
-    }
+        : scene_(scene), options_(options), builder_(find_builder(options.builder)), width_(kernel_width(options.kernel)) {}
 
     std::string library() const override { return "canopy"; }
     std::string builder() const override { return builder_.name; }
-    std::string kernel() const override { return options_.kernel; }
+    std::string kernel() const override { return kernel_name(width_); }
     std::string quality() const override { return ""; }
 
     void prepare() override { refs_ = make_prim_refs(scene_.triangles); }
 
+    // The timed build: the builder's binary BVH and its collapse into the kernel's layout.
     void build() override {
         binary_ = builder_.build(BuildInput{scene_.triangles, std::move(refs_)}, settings_);
-        wide_ = collapse<2>(binary_, scene_.triangles);
+        switch (width_) {
+            case 2: collapse_into<2>(layout_, binary_, scene_.triangles); break;
+            case 4: collapse_into<4>(layout_, binary_, scene_.triangles); break;
+            default: collapse_into<8>(layout_, binary_, scene_.triangles); break;
+        }
     }
 
     uint64_t render(const ShadingScene& scene, const PinholeCamera& camera, uint32_t frame, Image& image,
                     const std::function<void(float)>& on_tile) const override {
-        if (options_.robust) return render_frame(CanopyTracer<2, true>{wide_}, scene, camera, frame, image, on_tile);
-        return render_frame(CanopyTracer<2, false>{wide_}, scene, camera, frame, image, on_tile);
+        return std::visit([&](const auto& bvh) -> uint64_t {
+            constexpr int N = std::decay_t<decltype(bvh)>::kWidth;
+            if constexpr (kernel_compiled(N)) {
+                if (options_.robust) return render_frame(CanopyTracer<N, true>{bvh}, scene, camera, frame, image, on_tile);
+                return render_frame(CanopyTracer<N, false>{bvh}, scene, camera, frame, image, on_tile);
+            }
+            return 0;
+        }, layout_);
     }
 
     Hit trace(const Ray& ray) const override {
         Hit hit;
-        if (options_.robust) closest_hit<true>(wide_, ray, hit);
-        else closest_hit<false>(wide_, ray, hit);
+        std::visit([&](const auto& bvh) {
+            if constexpr (kernel_compiled(std::decay_t<decltype(bvh)>::kWidth)) {
+                if (options_.robust) closest_hit<true>(bvh, ray, hit);
+                else closest_hit<false>(bvh, ray, hit);
+            }
+        }, layout_);
         return hit;
     }
 
     AcceleratorReport report() const override {
         const TreeStats stats = tree_stats(binary_, scene_.triangles.size());
-        return {sah_cost(binary_, SahCosts{}), stats.nodes, stats.leaves, stats.depth, wide_.bytes(),
-                stats.refs_per_triangle};
+        const uint64_t bytes = std::visit([](const auto& bvh) { return bvh.bytes(); }, layout_);
+        return {sah_cost(binary_, SahCosts{}), stats.nodes, stats.leaves, stats.depth, bytes, stats.refs_per_triangle};
     }
 
 private:
     const FlatScene& scene_;
     CanopyOptions options_;
     const BuilderEntry& builder_;
+    const int width_;
     BuildSettings settings_;
     std::vector<PrimRef> refs_;
     Bvh binary_;
-    WideBvh<2> wide_;
+    AnyLayout layout_;
 };
 
 }  // namespace

@@ -17,7 +17,7 @@ namespace {
 using namespace canopy;
 
 struct RenderOptions {
-    std::string scene, output = "canopy.exr", builder = "binned", kernel = "bvh2", accel = "canopy";
+    std::string scene, output = "canopy.exr", builder = "binned", kernel = "auto", accel = "canopy";
     std::string embree_quality = "medium";
     int spp = 1, threads = 0, bounces = 8;
     std::vector<int> size{1024, 768};
@@ -84,7 +84,7 @@ int main(int argc, char** argv) {
     render->add_option("--spp", r.spp, "Samples (frames) per pixel")->check(CLI::Range(1, 1 << 20))->capture_default_str();
     render->add_option("--size", r.size, "Width and height")->expected(2)->check(CLI::Range(1, 16384))->capture_default_str();
     render->add_option("--builder", r.builder, "BVH builder: " + builder_names())->capture_default_str();
-    render->add_option("--kernel", r.kernel, "Traversal kernel: bvh2")->capture_default_str();
+    render->add_option("--kernel", r.kernel, "Traversal kernel: auto (widest), bvh2, bvh4, bvh8")->capture_default_str();
     render->add_option("--accel", r.accel, "canopy or embree")->check(CLI::IsMember({"canopy", "embree"}))->capture_default_str();
     render->add_option("--embree-quality", r.embree_quality, "low, medium or high")->capture_default_str();
     render->add_option("--bounces", r.bounces, "Maximum bounces")->check(CLI::Range(0, 1024))->capture_default_str();
@@ -98,7 +98,7 @@ int main(int argc, char** argv) {
     CLI::App* bench = app.add_subcommand("bench", "Benchmark builders and kernels against Embree (BENCHMARK.md)");
     bench->add_option("scene", b.scene, "Scene: scene.json, .obj or gen:NAME?tris=N&seed=S")->required();
     bench->add_option("--builder", b.builders, "Builders: " + builder_names())->delimiter(',')->capture_default_str();
-    bench->add_option("--kernel", b.kernels, "Kernels: bvh2")->delimiter(',')->capture_default_str();
+    bench->add_option("--kernel", b.kernels, "Kernels: auto (widest), bvh2, bvh4, bvh8")->delimiter(',')->capture_default_str();
     bench->add_option("--accel", accels, "Reference accelerators in the same run: embree")->delimiter(',')
         ->check(CLI::IsMember({"embree"}));
     bench->add_option("--embree-quality", qualities, "Embree qualities: low, medium, high")->delimiter(',')

@@ -2,6 +2,7 @@
 // Test support: brute-force closest hit over all triangles, random test rays, and the comparison
 // rule of the oracle tests (same triangle, or the same distance within 1e-5 where triangles tie).
 #include "accel/builder.h"
+#include "kernels/dispatch.h"
 #include "kernels/traverse.h"
 #include "scenes/scene.h"
 
@@ -96,19 +97,36 @@ struct KernelUnderTest {
 struct BuiltScene {
     Bvh binary;
     WideBvh<2> bvh2;
+    WideBvh<4> bvh4;
+    WideBvh<8> bvh8;
 };
 
 inline BuiltScene build_with(const std::string& builder, std::span<const Triangle> tris) {
     BuiltScene built;
     built.binary = find_builder(builder).build(BuildInput{tris, make_prim_refs(tris)}, BuildSettings{});
     built.bvh2 = collapse<2>(built.binary, tris);
+    if constexpr (kernel_compiled(4)) built.bvh4 = collapse<4>(built.binary, tris);
+    if constexpr (kernel_compiled(8)) built.bvh8 = collapse<8>(built.binary, tris);
     return built;
 }
 
+template <int N>
+void add_kernel(std::vector<KernelUnderTest>& kernels, const WideBvh<N>& bvh) {
+    if constexpr (kernel_compiled(N)) {
+        if (!cpu_runs(N)) return;
+        kernels.push_back({kernel_name(N),
+                           [&bvh](const Ray& r) { Hit h; closest_hit(bvh, r, h); return h; },
+                           [&bvh](const Ray& r) { return any_hit(bvh, r); }});
+    }
+}
+
+// Every kernel this build and CPU run, over one built scene.
 inline std::vector<KernelUnderTest> kernels_of(const BuiltScene& built) {
-    return {{"bvh2",
-             [&](const Ray& r) { Hit h; closest_hit(built.bvh2, r, h); return h; },
-             [&](const Ray& r) { return any_hit(built.bvh2, r); }}};
+    std::vector<KernelUnderTest> kernels;
+    add_kernel(kernels, built.bvh2);
+    add_kernel(kernels, built.bvh4);
+    add_kernel(kernels, built.bvh8);
+    return kernels;
 }
 
 // Checks every builder x kernel against the oracle on `rays`: closest hits, and any-hit agreement.

@@ -57,7 +57,7 @@ TEST_CASE("every builder's tree is well formed", "[builders]") {
             const TreeStats stats = tree_stats(built.binary, flat.triangles.size());
             CHECK(stats.refs_per_triangle >= 1.0);
             CHECK(built.bvh2.nodes.size() == stats.inner_nodes);
-            CHECK(built.bvh2.triangles.size() == stats.references);
+            CHECK(built.bvh2.leaves.size() == stats.references);
         }
     }
 }
