@@ -107,12 +107,12 @@ BinGrid bin_refs(const PrimRef* refs, const Range& range, const BinMapping& mapp
 struct Split {
     int axis = -1;
     uint32_t bin = 0;  // refs in bins [0, bin) go left
-    float cost = std::numeric_limits<float>::infinity();  // A_left N_left + A_right N_right, half areas
+    float cost = std::numeric_limits<float>::infinity();  // A_left T_left + A_right T_right, half areas, T tests
     Box4 left, right;
 };
 
-// The SAH sweep over the bin planes of every axis.
-Split best_split(const BinGrid& grid, uint32_t n) {
+// The SAH sweep over the bin planes of every axis; a side's cost is its area times its triangle tests.
+Split best_split(const BinGrid& grid, uint32_t n, const BuildSettings& settings) {
     Split best;
     for (int axis = 0; axis < 3; ++axis) {
         const Bin* bins = grid.bins[axis];
@@ -120,14 +120,14 @@ Split best_split(const BinGrid& grid, uint32_t n) {
         Box4 right_box[kMaxBins];
         Bin suffix = bins[n - 1];
         for (uint32_t i = n - 1; i > 0; --i) {
-            right_cost[i] = suffix.count ? suffix.bounds.half_area() * float(suffix.count) : -1.0f;
+            right_cost[i] = suffix.count ? suffix.bounds.half_area() * settings.leaf_tests(suffix.count) : -1.0f;
             right_box[i] = suffix.bounds;
             suffix.add(bins[i - 1]);
         }
         Bin prefix = bins[0];
         for (uint32_t i = 1; i < n; prefix.add(bins[i++])) {
             if (prefix.count == 0 || right_cost[i] < 0.0f) continue;
-            const float cost = prefix.bounds.half_area() * float(prefix.count) + right_cost[i];
+            const float cost = prefix.bounds.half_area() * settings.leaf_tests(prefix.count) + right_cost[i];
             if (cost < best.cost) best = {axis, i, cost, prefix.bounds, right_box[i]};
         }
     }
@@ -163,10 +163,10 @@ private:
         if (n > 1 && depth < kMedianFallbackDepth && spread(range.centroids) > 0.0f) {
             // Fewer bins for small nodes: a bin per reference is enough, and small nodes dominate in number.
             const BinMapping mapping(range.centroids, std::min(bins_, std::max(n, 4u)));
-            const Split split = best_split(bin_refs(refs_.data(), range, mapping), mapping.bins);
+            const Split split = best_split(bin_refs(refs_.data(), range, mapping), mapping.bins, settings_);
             const float area = range.bounds.half_area();
             const float split_cost = settings_.costs.inner * area + settings_.costs.triangle * split.cost;
-            const bool leaf_is_cheaper = n <= max_leaf_ && settings_.costs.triangle * float(n) * area <= split_cost;
+            const bool leaf_is_cheaper = n <= max_leaf_ && settings_.costs.triangle * settings_.leaf_tests(n) * area <= split_cost;
             if (split.axis >= 0 && !leaf_is_cheaper) {
                 partition(range, mapping, split, node, descendants, depth);
                 return;

@@ -12,18 +12,18 @@ public:
     Collapser(const Bvh& bvh, WideBvh<N>& out) : bvh_(bvh), out_(out) {}
 
     void run() {
-        const BvhNode& root = bvh_.nodes[0];
-        if (root.is_leaf()) {
-            uint32_t lone[1] = {0};
-            emit(std::span<const uint32_t>(lone, 1));
+        out_.nodes.resize(1);
+        if (bvh_.nodes[0].is_leaf()) {
+            const uint32_t lone[1] = {0};
+            emit(0, std::span<const uint32_t>(lone, 1));
         } else {
-            emit_children_of(0);
+            emit_children_of(0, 0);
         }
     }
 
 private:
-    // Emits the wide node whose children come from opening binary node `index`.
-    uint32_t emit_children_of(uint32_t index) {
+    // Writes wide node `self`, whose children come from opening binary node `index`.
+    void emit_children_of(uint32_t index, uint32_t self) {
         std::array<uint32_t, N> open{};
         int n = 0;
         open[n++] = bvh_.nodes[index].index;
@@ -40,13 +40,14 @@ private:
             open[widest] = first;
             open[n++] = first + 1;
         }
-        return emit(std::span<const uint32_t>(open.data(), size_t(n)));
+        emit(self, std::span<const uint32_t>(open.data(), size_t(n)));
     }
 
-    uint32_t emit(std::span<const uint32_t> children) {
-        const uint32_t self = uint32_t(out_.nodes.size());
-        out_.nodes.emplace_back();
+    // Writes the node at `self`: its inner children get consecutive slots first, then each is filled in
+    // turn, so siblings sit next to each other in memory as the traversal visits them.
+    void emit(uint32_t self, std::span<const uint32_t> children) {
         for (int i = 0; i < N; ++i) set_empty(self, i);
+        uint32_t next = uint32_t(out_.nodes.size());
         for (size_t i = 0; i < children.size(); ++i) {
             const BvhNode& c = bvh_.nodes[children[i]];
             set_box(self, int(i), c.bounds);
@@ -56,12 +57,13 @@ private:
                 leaf_refs_.push_back({leaf_entries_, c.index, c.count});
                 leaf_entries_ += leaf_entries(N, c.count);
             } else {
-                const uint32_t child = emit_children_of(children[i]);  // may reallocate nodes
-                out_.nodes[self].child[i] = child;
+                out_.nodes[self].child[i] = next++;
                 out_.nodes[self].count[i] = 0;
             }
         }
-        return self;
+        out_.nodes.resize(next);
+        for (size_t i = 0; i < children.size(); ++i)
+            if (!bvh_.nodes[children[i]].is_leaf()) emit_children_of(children[i], out_.nodes[self].child[i]);
     }
 
     void set_box(uint32_t node, int i, const BBox& box) {

@@ -18,6 +18,7 @@ struct Simd<4> {
     static F set1(float x) { return _mm_set1_ps(x); }
     static F sub(F a, F b) { return _mm_sub_ps(a, b); }
     static F mul(F a, F b) { return _mm_mul_ps(a, b); }
+    static F fmsub(F a, F b, F c) { return _mm_fmsub_ps(a, b, c); }
     static F max(F a, F b) { return _mm_max_ps(a, b); }
     static F min(F a, F b) { return _mm_min_ps(a, b); }
     static uint32_t le_mask(F a, F b) { return uint32_t(_mm_movemask_ps(_mm_cmple_ps(a, b))); }
@@ -32,6 +33,7 @@ struct Simd<8> {
     static F set1(float x) { return _mm256_set1_ps(x); }
     static F sub(F a, F b) { return _mm256_sub_ps(a, b); }
     static F mul(F a, F b) { return _mm256_mul_ps(a, b); }
+    static F fmsub(F a, F b, F c) { return _mm256_fmsub_ps(a, b, c); }
     static F max(F a, F b) { return _mm256_max_ps(a, b); }
     static F min(F a, F b) { return _mm256_min_ps(a, b); }
     static uint32_t le_mask(F a, F b) { return uint32_t(_mm256_movemask_ps(_mm256_cmp_ps(a, b, _CMP_LE_OQ))); }

@@ -35,6 +35,10 @@ public:
         sz_ = 1.0f / ray.dir[kz_];
         sx_ = ray.dir[kx_] * sz_;
         sy_ = ray.dir[ky_] * sz_;
+#if defined(__FMA__)
+        org4_[0] = _mm_set1_ps(org_[kx_]), org4_[1] = _mm_set1_ps(org_[ky_]), org4_[2] = _mm_set1_ps(org_[kz_]);
+        sx4_ = _mm_set1_ps(sx_), sy4_ = _mm_set1_ps(sy_), sz4_ = _mm_set1_ps(sz_);
+#endif
     }
 
     // Intersects in (tmin, hit.t]; on a hit updates `hit` and returns true.
@@ -70,15 +74,14 @@ public:
     // Four triangles at once, operation for operation the scalar test above, so every kernel finds the same
     // hit at the same distance. Returns the lane hit (the nearest), or -1.
     int intersect4(const TriangleBlock4& block, float tmin, Hit& hit) const {
-        const __m128 sx = _mm_set1_ps(sx_), sy = _mm_set1_ps(sy_), sz = _mm_set1_ps(sz_);
         __m128 x[3], y[3], z[3];  // sheared coordinates of the three vertices
         for (int v = 0; v < 3; ++v) {
-            const __m128 px = _mm_sub_ps(_mm_load_ps(block.v[v][kx_]), _mm_set1_ps(org_[kx_]));
-            const __m128 py = _mm_sub_ps(_mm_load_ps(block.v[v][ky_]), _mm_set1_ps(org_[ky_]));
-            const __m128 pz = _mm_sub_ps(_mm_load_ps(block.v[v][kz_]), _mm_set1_ps(org_[kz_]));
-            x[v] = _mm_sub_ps(px, _mm_mul_ps(sx, pz));
-            y[v] = _mm_sub_ps(py, _mm_mul_ps(sy, pz));
-            z[v] = _mm_mul_ps(sz, pz);
+            const __m128 px = _mm_sub_ps(_mm_load_ps(block.v[v][kx_]), org4_[0]);
+            const __m128 py = _mm_sub_ps(_mm_load_ps(block.v[v][ky_]), org4_[1]);
+            const __m128 pz = _mm_sub_ps(_mm_load_ps(block.v[v][kz_]), org4_[2]);
+            x[v] = _mm_sub_ps(px, _mm_mul_ps(sx4_, pz));
+            y[v] = _mm_sub_ps(py, _mm_mul_ps(sy4_, pz));
+            z[v] = _mm_mul_ps(sz4_, pz);
         }
         const __m128 u = difference_of_products4(x[2], y[1], y[2], x[1]);
         const __m128 v = difference_of_products4(x[0], y[2], y[0], x[2]);
@@ -127,6 +130,9 @@ private:
     Vec3 org_;
     int kx_, ky_, kz_;
     float sx_, sy_, sz_;
+#if defined(__FMA__)
+    __m128 org4_[3], sx4_, sy4_, sz4_;  // the same values broadcast once per ray for intersect4
+#endif
 };
 
 }  // namespace canopy

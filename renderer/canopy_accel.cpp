@@ -24,7 +24,9 @@ void collapse_into(AnyLayout& layout, const Bvh& bvh, std::span<const Triangle> 
 class CanopyAccelerator final : public Accelerator {
 public:
     CanopyAccelerator(const FlatScene& scene, const CanopyOptions& options)
-        : scene_(scene), options_(options), builder_(find_builder(options.builder)), width_(kernel_width(options.kernel)) {}
+        : scene_(scene), options_(options), builder_(find_builder(options.builder)), width_(kernel_width(options.kernel)) {
+        if (width_ > 2) settings_.leaf_block = 4;  // the SIMD kernels test leaf triangles 4 at a time
+    }
 
     std::string library() const override { return "canopy"; }
     std::string builder() const override { return builder_.name; }
