@@ -2,9 +2,10 @@
 // Stack-based traversal of a WideBvh<N>, one template for every width: children tested in one pass (scalar
 // for N = 2, SSE for N = 4, AVX for N = 8), visited near to far. Robust = true pads the far slab distance
 // so rounding never culls a box the ray crosses (Ize 2013, "Robust BVH Ray Traversal"); Robust = false is
-// the fast mode. A Counter other than NoCount records inner nodes, leaves and triangles visited; with
-// NoCount the calls compile to nothing.
+// the fast mode. TriangleTest is WatertightRay (default) or MollerTrumboreRay (fast mode). A Counter other
+// than NoCount records inner nodes, leaves and triangles visited; with NoCount the calls compile to nothing.
 #include "accel/wide_bvh.h"
+#include "kernels/moller_trumbore.h"
 #include "kernels/simd.h"
 #include "kernels/watertight.h"
 
@@ -110,8 +111,8 @@ inline void prefetch(const WideBvh<N>& bvh, const StackEntry& e) {
 }
 
 // Intersects a leaf's triangles; true when a hit was recorded.
-template <int N, class Counter>
-inline bool intersect_leaf(const WideBvh<N>& bvh, const StackEntry& leaf, const WatertightRay& tri_ray, float tmin,
+template <int N, class TriangleTest, class Counter>
+inline bool intersect_leaf(const WideBvh<N>& bvh, const StackEntry& leaf, const TriangleTest& tri_ray, float tmin,
                            Hit& hit, Counter& counter) {
     counter.leaf();
     counter.triangles(leaf.count);
@@ -132,13 +133,13 @@ inline bool intersect_leaf(const WideBvh<N>& bvh, const StackEntry& leaf, const 
 
 // Closest hit (Query::Closest) or any hit (Query::Any) in (ray.tmin, ray.tmax]. For Any, `hit` holds the
 // first hit found, not the closest.
-template <Query Q, bool Robust = true, int N, class Counter = NoCount>
+template <Query Q, bool Robust = true, class TriangleTest = WatertightRay, int N, class Counter = NoCount>
 bool traverse(const WideBvh<N>& bvh, const Ray& ray, Hit& hit, Counter&& counter = {}) {
     hit = Hit{};
     hit.t = ray.tmax;
     if (bvh.nodes.empty()) return false;
     const detail::SlabRay<N> box_ray(ray);
-    const WatertightRay tri_ray(ray);
+    const TriangleTest tri_ray(ray);
     std::array<detail::StackEntry, kMaxBvhDepth * (N - 1) + 1> stack;
     int sp = 0;
     detail::StackEntry current{0, 0, ray.tmin};
@@ -185,15 +186,15 @@ bool traverse(const WideBvh<N>& bvh, const Ray& ray, Hit& hit, Counter&& counter
     }
 }
 
-template <bool Robust = true, int N>
+template <bool Robust = true, class TriangleTest = WatertightRay, int N>
 bool closest_hit(const WideBvh<N>& bvh, const Ray& ray, Hit& hit) {
-    return traverse<Query::Closest, Robust>(bvh, ray, hit);
+    return traverse<Query::Closest, Robust, TriangleTest>(bvh, ray, hit);
 }
 
-template <bool Robust = true, int N>
+template <bool Robust = true, class TriangleTest = WatertightRay, int N>
 bool any_hit(const WideBvh<N>& bvh, const Ray& ray) {
     Hit hit;
-    return traverse<Query::Any, Robust>(bvh, ray, hit);
+    return traverse<Query::Any, Robust, TriangleTest>(bvh, ray, hit);
 }
 
 }  // namespace canopy

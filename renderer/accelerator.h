@@ -21,7 +21,7 @@ public:
     virtual ~Accelerator() = default;
     virtual std::string library() const = 0;  // "canopy" or "embree"
     virtual std::string builder() const = 0;  // canopy builder name, or null-like "" for embree
-    virtual std::string kernel() const = 0;
+    virtual std::string kernel() const = 0;  // canopy: width and modes, e.g. "bvh8" or "bvh8 fast mt"
     virtual std::string quality() const = 0;  // embree build quality, "" for canopy
 
     // Untimed preparation for one build (canopy: PrimRef generation), then the timed build.
@@ -37,7 +37,8 @@ public:
 struct CanopyOptions {
     std::string builder = "binned";
     std::string kernel = "auto";  // bvh2, bvh4, bvh8, or auto: the widest this build and CPU run
-    bool robust = true;  // robust traversal (Ize 2013); false is the measured fast mode
+    bool robust = true;      // robust traversal (Ize 2013); false is the measured fast mode
+    bool watertight = true;  // watertight intersection (Woop et al. 2013); false: Möller–Trumbore, the fast mode
 };
 
 // Throws std::invalid_argument for an unknown builder or kernel.

@@ -48,7 +48,7 @@ std::vector<Entry> make_entries(const FlatScene& flat, const BenchOptions& o) {
     std::vector<Entry> entries;
     for (const std::string& builder : o.builders)
         for (const std::string& kernel : o.kernels)
-            entries.push_back({make_canopy_accelerator(flat, {builder, kernel, o.robust})});
+            entries.push_back({make_canopy_accelerator(flat, {builder, kernel, o.robust, o.watertight})});
     for (const std::string& quality : o.embree_qualities)
         entries.push_back({make_embree_accelerator(flat, quality, o.threads)});
     return entries;

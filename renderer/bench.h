@@ -9,6 +9,7 @@ struct BenchOptions {
     std::vector<std::string> builders{"binned"};
     std::vector<std::string> kernels{"auto"};
     bool robust = true;
+    bool watertight = true;
     std::vector<std::string> embree_qualities;  // empty: no Embree rows
     int builds = 20;
     int frames = 10;

@@ -8,11 +8,20 @@
 namespace canopy {
 namespace {
 
-template <int N, bool Robust>
+template <int N, bool Robust, class TriangleTest>
 struct CanopyTracer {
     const WideBvh<N>& bvh;
-    bool closest(const Ray& ray, Hit& hit) const { return closest_hit<Robust>(bvh, ray, hit); }
+    bool closest(const Ray& ray, Hit& hit) const { return closest_hit<Robust, TriangleTest>(bvh, ray, hit); }
 };
+
+// Calls f(robust, triangle test) with both as types, so each combination is its own compiled kernel.
+template <class F>
+auto with_modes(const CanopyOptions& o, F&& f) {
+    using Watertight = std::type_identity<WatertightRay>;
+    using Moller = std::type_identity<MollerTrumboreRay>;
+    if (o.robust) return o.watertight ? f(std::true_type{}, Watertight{}) : f(std::true_type{}, Moller{});
+    return o.watertight ? f(std::false_type{}, Watertight{}) : f(std::false_type{}, Moller{});
+}
 
 using AnyLayout = std::variant<WideBvh<2>, WideBvh<4>, WideBvh<8>>;
 
@@ -30,7 +39,9 @@ public:
 
     std::string library() const override { return "canopy"; }
     std::string builder() const override { return builder_.name; }
-    std::string kernel() const override { return kernel_name(width_); }
+    std::string kernel() const override {
+        return kernel_name(width_) + (options_.robust ? "" : " fast") + (options_.watertight ? "" : " mt");
+    }
     std::string quality() const override { return ""; }
 
     void prepare() override { refs_ = make_prim_refs(scene_.triangles); }
@@ -50,8 +61,10 @@ public:
         return std::visit([&](const auto& bvh) -> uint64_t {
             constexpr int N = std::decay_t<decltype(bvh)>::kWidth;
             if constexpr (kernel_compiled(N)) {
-                if (options_.robust) return render_frame(CanopyTracer<N, true>{bvh}, scene, camera, frame, image, on_tile);
-                return render_frame(CanopyTracer<N, false>{bvh}, scene, camera, frame, image, on_tile);
+                return with_modes(options_, [&](auto robust, auto test) {
+                    using Tracer = CanopyTracer<N, decltype(robust)::value, typename decltype(test)::type>;
+                    return render_frame(Tracer{bvh}, scene, camera, frame, image, on_tile);
+                });
             }
             return 0;
         }, layout_);
@@ -61,8 +74,9 @@ public:
         Hit hit;
         std::visit([&](const auto& bvh) {
             if constexpr (kernel_compiled(std::decay_t<decltype(bvh)>::kWidth)) {
-                if (options_.robust) closest_hit<true>(bvh, ray, hit);
-                else closest_hit<false>(bvh, ray, hit);
+                with_modes(options_, [&](auto robust, auto test) {
+                    return closest_hit<decltype(robust)::value, typename decltype(test)::type>(bvh, ray, hit);
+                });
             }
         }, layout_);
         return hit;

@@ -22,6 +22,7 @@ struct RenderOptions {
     int spp = 1, threads = 0, bounces = 8;
     std::vector<int> size{1024, 768};
     bool material_albedo = false, fast_traversal = false;
+    std::string intersector = "watertight";
 };
 
 std::string builder_names() {
@@ -41,7 +42,7 @@ void run_render(const RenderOptions& o) {
     const FlatScene flat = flatten(scene);
     std::unique_ptr<Accelerator> accel =
         o.accel == "embree" ? make_embree_accelerator(flat, o.embree_quality, o.threads)
-                            : make_canopy_accelerator(flat, {o.builder, o.kernel, !o.fast_traversal});
+                            : make_canopy_accelerator(flat, {o.builder, o.kernel, !o.fast_traversal, o.intersector == "watertight"});
     const auto start = std::chrono::steady_clock::now();
     accel->prepare();
     accel->build();
@@ -91,6 +92,8 @@ int main(int argc, char** argv) {
     render->add_option("--threads", threads, "Threads for every library (0: all)")->check(CLI::Range(0, 4096));
     render->add_flag("--materials", r.material_albedo, "Use the .mtl Kd colours as albedo (protocol: 0.8 grey)");
     render->add_flag("--fast-traversal", r.fast_traversal, "Unpadded slab test (not robust)");
+    render->add_option("--intersector", r.intersector, "watertight (Woop et al. 2013) or moller (Möller–Trumbore, fast)")
+        ->check(CLI::IsMember({"watertight", "moller"}))->capture_default_str();
 
     BenchOptions b;
     std::vector<std::string> accels;
@@ -110,7 +113,10 @@ int main(int argc, char** argv) {
     bench->add_option("--threads", threads, "Threads for every library (0: all)")->check(CLI::Range(0, 4096));
     bench->add_flag("--materials", b.material_albedo, "Use the .mtl Kd colours as albedo");
     bool fast = false;
+    std::string intersector = "watertight";
     bench->add_flag("--fast-traversal", fast, "Unpadded slab test (not robust)");
+    bench->add_option("--intersector", intersector, "watertight (Woop et al. 2013) or moller (Möller–Trumbore, fast)")
+        ->check(CLI::IsMember({"watertight", "moller"}))->capture_default_str();
     std::vector<int> bench_size{1024, 768};
     bench->add_option("--size", bench_size, "Width and height")->expected(2)->check(CLI::Range(1, 16384))->capture_default_str();
 
@@ -124,6 +130,7 @@ int main(int argc, char** argv) {
         } else {
             b.threads = threads;
             b.robust = !fast;
+            b.watertight = intersector == "watertight";
             b.width = bench_size[0], b.height = bench_size[1];
             if (!accels.empty()) b.embree_qualities = qualities;
             run_bench(b);

@@ -16,17 +16,19 @@
 
 namespace canopy::test {
 
-inline Hit brute_force_closest(std::span<const Triangle> tris, const Ray& ray) {
-    const WatertightRay wt(ray);
+template <class TriangleTest = WatertightRay>
+Hit brute_force_closest(std::span<const Triangle> tris, const Ray& ray) {
+    const TriangleTest wt(ray);
     Hit hit;
     hit.t = ray.tmax;
     for (uint32_t i = 0; i < tris.size(); ++i) wt.intersect(tris[i].v0, tris[i].v1, tris[i].v2, i, ray.tmin, hit);
     return hit;
 }
 
-inline std::vector<Hit> brute_force_all(std::span<const Triangle> tris, const std::vector<Ray>& rays) {
+template <class TriangleTest = WatertightRay>
+std::vector<Hit> brute_force_all(std::span<const Triangle> tris, const std::vector<Ray>& rays) {
     std::vector<Hit> hits(rays.size());
-    tbb::parallel_for(size_t(0), rays.size(), [&](size_t i) { hits[i] = brute_force_closest(tris, rays[i]); });
+    tbb::parallel_for(size_t(0), rays.size(), [&](size_t i) { hits[i] = brute_force_closest<TriangleTest>(tris, rays[i]); });
     return hits;
 }
 
@@ -68,15 +70,27 @@ inline std::vector<Ray> random_rays(std::span<const Triangle> tris, size_t count
     return rays;
 }
 
-// Counts disagreements between a kernel's hits and the oracle's; reports the first few.
+// The rays of random_rays whose origin is not on a surface (kinds 0 to 2). A ray from one point of a flat
+// wall to another lies in the plane of the wall's triangles; only the watertight test is exact there.
+inline std::vector<Ray> off_surface(const std::vector<Ray>& rays) {
+    std::vector<Ray> out;
+    for (size_t i = 0; i < rays.size(); ++i)
+        if (i % 4 != 3) out.push_back(rays[i]);
+    return out;
+}
+
+// Counts disagreements between a kernel's hits and the oracle's; reports the first few. The same triangle
+// must be hit at exactly the same distance when the kernel rounds like the oracle (canopy's kernels), within
+// 1e-5 relative otherwise; another triangle only at a tie, the same distance within 1e-5 relative.
 inline size_t count_mismatches(const std::vector<Ray>& rays, const std::vector<Hit>& expected,
-                               const std::vector<Hit>& actual, const std::string& what) {
+                               const std::vector<Hit>& actual, const std::string& what, bool same_rounding = true) {
     size_t mismatches = 0;
     for (size_t i = 0; i < rays.size(); ++i) {
         const Hit& e = expected[i];
         const Hit& a = actual[i];
         bool same = e.found() == a.found();
-        if (same && e.found() && e.prim != a.prim) same = std::abs(e.t - a.t) <= 1e-5f * std::abs(e.t);
+        const bool close = std::abs(e.t - a.t) <= 1e-5f * std::abs(e.t);
+        if (same && e.found()) same = e.prim == a.prim && same_rounding ? e.t == a.t : close;
         if (!same && ++mismatches <= 3) {
             const Ray& r = rays[i];
             UNSCOPED_INFO(what << ": ray " << i << " org (" << r.org.x << ", " << r.org.y << ", " << r.org.z
@@ -110,31 +124,35 @@ inline BuiltScene build_with(const std::string& builder, std::span<const Triangl
     return built;
 }
 
-template <int N>
+template <bool Robust, class TriangleTest, int N>
 void add_kernel(std::vector<KernelUnderTest>& kernels, const WideBvh<N>& bvh) {
     if constexpr (kernel_compiled(N)) {
         if (!cpu_runs(N)) return;
         kernels.push_back({kernel_name(N),
-                           [&bvh](const Ray& r) { Hit h; closest_hit(bvh, r, h); return h; },
-                           [&bvh](const Ray& r) { return any_hit(bvh, r); }});
+                           [&bvh](const Ray& r) { Hit h; closest_hit<Robust, TriangleTest>(bvh, r, h); return h; },
+                           [&bvh](const Ray& r) { return any_hit<Robust, TriangleTest>(bvh, r); }});
     }
 }
 
-// Every kernel this build and CPU run, over one built scene.
-inline std::vector<KernelUnderTest> kernels_of(const BuiltScene& built) {
+// Every kernel this build and CPU run, over one built scene, in the given traversal and intersection modes.
+template <bool Robust = true, class TriangleTest = WatertightRay>
+std::vector<KernelUnderTest> kernels_of(const BuiltScene& built) {
     std::vector<KernelUnderTest> kernels;
-    add_kernel(kernels, built.bvh2);
-    add_kernel(kernels, built.bvh4);
-    add_kernel(kernels, built.bvh8);
+    add_kernel<Robust, TriangleTest>(kernels, built.bvh2);
+    add_kernel<Robust, TriangleTest>(kernels, built.bvh4);
+    add_kernel<Robust, TriangleTest>(kernels, built.bvh8);
     return kernels;
 }
 
-// Checks every builder x kernel against the oracle on `rays`: closest hits, and any-hit agreement.
-inline void check_against_oracle(std::span<const Triangle> tris, const std::vector<Ray>& rays, const std::string& scene) {
-    const std::vector<Hit> expected = brute_force_all(tris, rays);
+// Checks every builder x kernel against the oracle on `rays`: closest hits, and any-hit agreement. At most
+// `allowed` rays may disagree (0 but for the non-conservative fast traversal).
+template <bool Robust = true, class TriangleTest = WatertightRay>
+void check_against_oracle(std::span<const Triangle> tris, const std::vector<Ray>& rays, const std::string& scene,
+                          size_t allowed = 0) {
+    const std::vector<Hit> expected = brute_force_all<TriangleTest>(tris, rays);
     for (const BuilderEntry& builder : builders()) {
         const BuiltScene built = build_with(builder.name, tris);
-        for (const KernelUnderTest& kernel : kernels_of(built)) {
+        for (const KernelUnderTest& kernel : kernels_of<Robust, TriangleTest>(built)) {
             const std::string what = scene + " / " + builder.name + " / " + kernel.name;
             std::vector<Hit> actual(rays.size());
             std::vector<char> any(rays.size());
@@ -142,11 +160,11 @@ inline void check_against_oracle(std::span<const Triangle> tris, const std::vect
                 actual[i] = kernel.closest(rays[i]);
                 any[i] = kernel.any(rays[i]);
             });
-            CHECK(count_mismatches(rays, expected, actual, what) == 0);
+            CHECK(count_mismatches(rays, expected, actual, what) <= allowed);
             size_t any_mismatches = 0;
             for (size_t i = 0; i < rays.size(); ++i) any_mismatches += bool(any[i]) != expected[i].found();
             INFO(what << ": any-hit disagreements");
-            CHECK(any_mismatches == 0);
+            CHECK(any_mismatches <= allowed);
         }
     }
 }
