@@ -50,7 +50,7 @@ Vec3 trace_path(const Tracer& tracer, const ShadingScene& scene, Ray ray, Rng& r
         throughput *= scene.albedo(hit.prim);
         if (depth == scene.settings.max_bounces) break;
         const Vec3 p = tri.v0 + hit.u * (tri.v1 - tri.v0) + hit.v * (tri.v2 - tri.v0);
-        ray = Ray{offset_ray_origin(p, n), cosine_direction(n, rng.next_float(), rng.next_float())};
+        ray = Ray{offset_ray_origin(p, n, triangle_point_error(tri)), cosine_direction(n, rng.next_float(), rng.next_float())};
     }
     return radiance;
 }

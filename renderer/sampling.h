@@ -48,7 +48,7 @@ inline Vec3 cosine_direction(const Vec3& n, float u1, float u2) {
 // Moves a hit point off its surface along the normal n that faces the new ray: a few ulps scaled by
 // the magnitude of each coordinate, a fixed epsilon near the origin (Wächter and Binder 2019,
 // "A Fast and Robust Method for Avoiding Self-Intersection", Ray Tracing Gems ch. 6).
-inline Vec3 offset_ray_origin(const Vec3& p, const Vec3& n) {
+inline Vec3 offset_ray_origin(const Vec3& p, const Vec3& n, float triangle_error = 0.0f) {
     constexpr float kOrigin = 1.0f / 32.0f, kFloatScale = 1.0f / 65536.0f, kIntScale = 256.0f;
     Vec3 out;
     for (int a = 0; a < 3; ++a) {
@@ -56,7 +56,17 @@ inline Vec3 offset_ray_origin(const Vec3& p, const Vec3& n) {
         const int32_t bits = std::bit_cast<int32_t>(p[a]) + (p[a] < 0 ? -of : of);
         out[a] = std::abs(p[a]) < kOrigin ? p[a] + kFloatScale * n[a] : std::bit_cast<float>(bits);
     }
-    return out;
+    return out + triangle_error * n;
+}
+
+// How far a hit point on a triangle may lie from the triangle's plane, seen by a ray-triangle test whose
+// rounding scales with the vertex coordinates: gamma(7) times the largest of them (pbrt-v4 sec. 6.8.5's
+// bound on the error of a point from barycentrics). The offset above is relative to the hit point alone;
+// on a huge triangle whose vertices lie far from the hit point that is too little, and a ray leaving the
+// surface re-hits it at a tiny t and continues on the wrong side.
+inline float triangle_point_error(const Triangle& t) {
+    const Vec3 m = glm::max(glm::abs(t.v0), glm::max(glm::abs(t.v1), glm::abs(t.v2)));
+    return 7.0f * 0x1p-24f / (1.0f - 7.0f * 0x1p-24f) * std::max(m.x, std::max(m.y, m.z));
 }
 
 }  // namespace canopy

@@ -76,6 +76,50 @@ TEST_CASE("offset origins leave the surface on the normal's side at every magnit
     }
 }
 
+// Rays leaving conference's floor: two coplanar triangles 2600 units wide, so their vertices lie far from the
+// hit points, in one leaf with a small triangle above them (so the leaf's box is not flat). The hit point's
+// magnitude alone gives too small an offset (3e-5 at y = -1.57): a ray leaving the floor upwards "hits" it at
+// t ~ 5e-5, is turned to the other side and escapes below the floor. The first four rays are such rays,
+// recorded in conference; the others are random.
+size_t self_hits_on_huge_floor(bool with_triangle_error) {
+    const float floor_y = -0x1.927914p+0f;
+    const std::vector<Triangle> scene{
+        {Vec3(-0x1.d971aap+9f, floor_y, -0x1.fc0cccp+9f), Vec3(-0x1.d971aap+9f, floor_y, 0x1.4e3e98p+9f),
+         Vec3(0x1.9d5p+10f, floor_y, -0x1.fc0cccp+9f)},
+        {Vec3(-0x1.d971aap+9f, floor_y, 0x1.4e3e98p+9f), Vec3(0x1.9d5p+10f, floor_y, 0x1.4e3e98p+9f),
+         Vec3(0x1.9d5p+10f, floor_y, -0x1.fc0cccp+9f)},
+        {Vec3(0, 1, 0), Vec3(1, 1, 0), Vec3(0, 1, 1)}};
+    const BuiltScene built = build_with("binned", scene);
+    REQUIRE(built.binary.nodes.size() == 1);  // one leaf, as in conference
+    std::vector<std::pair<Vec3, Vec3>> departures{  // point on the floor, direction
+        {{0x1.11ec5cp+9f, floor_y, -0x1.610a78p+7f}, {0x1.7f55d2p-1f, 0x1.9ce6b8p-2f, -0x1.0d6656p-1f}},
+        {{0x1.8b938ap+9f, floor_y, 0x1.f5872p+6f}, {0x1.842064p-1f, 0x1.3ee11p-1f, 0x1.8c576ep-3f}},
+        {{0x1.10b4d8p+9f, floor_y, 0x1.59b97cp+8f}, {-0x1.69c59cp-1f, 0x1.4a5732p-1f, -0x1.29977ap-2f}},
+        {{-0x1.0d366p+7f, floor_y, 0x1.2a03cp+5f}, {0x1.e1507p-2f, 0x1.0ef45p-1f, -0x1.69ade6p-1f}}};
+    std::mt19937_64 rng(7);
+    std::uniform_real_distribution<float> u(0.0f, 1.0f);
+    for (int i = 0; i < 50000; ++i) {
+        const Triangle& t = scene[i % 2];
+        float a = u(rng), b = u(rng);
+        if (a + b > 1) a = 1 - a, b = 1 - b;
+        departures.push_back({t.v0 + a * (t.v1 - t.v0) + b * (t.v2 - t.v0), cosine_direction(Vec3(0, 1, 0), u(rng), u(rng))});
+    }
+    const float error = with_triangle_error ? triangle_point_error(scene[0]) : 0.0f;
+    size_t self_hits = 0;
+    for (const KernelUnderTest& kernel : kernels_of(built)) {
+        for (const auto& [p, dir] : departures) {
+            const Hit hit = kernel.closest(Ray{offset_ray_origin(p, Vec3(0, 1, 0), error), dir});
+            self_hits += hit.found() && hit.prim < 2;
+        }
+    }
+    return self_hits;
+}
+
+TEST_CASE("rays leaving a huge floor never re-hit it", "[render]") {
+    CHECK(self_hits_on_huge_floor(true) == 0);
+    CHECK(self_hits_on_huge_floor(false) > 0);  // the failure the triangle term exists for
+}
+
 TEST_CASE("an empty sky gives one ray per path and radiance 1", "[render]") {
     FlatScene flat;
     flat.triangles = {{Vec3(0, 0, 10), Vec3(1, 0, 10), Vec3(0, 1, 10)}};  // behind the camera
