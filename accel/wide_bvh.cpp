@@ -6,12 +6,18 @@
 namespace canopy {
 namespace {
 
+// A leaf of the wide tree: its first entry in WideBvh::leaves, and the binary leaf's refs it is made of.
+struct LeafRun {
+    uint32_t first_entry, first_ref, count;
+};
+
 template <int N>
 class Collapser {
 public:
     Collapser(const Bvh& bvh, WideBvh<N>& out) : bvh_(bvh), out_(out) {}
 
-    void run() {
+    // Writes every node; returns the leaves in emission order, for filling WideBvh::leaves in parallel.
+    std::vector<LeafRun> run() {
         out_.nodes.resize(1);
         if (bvh_.nodes[0].is_leaf()) {
             const uint32_t lone[1] = {0};
@@ -19,7 +25,10 @@ public:
         } else {
             emit_children_of(0, 0);
         }
+        return std::move(leaf_runs_);
     }
+
+    uint32_t leaf_entries() const { return leaf_entries_; }
 
 private:
     // Writes wide node `self`, whose children come from opening binary node `index`.
@@ -54,8 +63,8 @@ private:
             if (c.is_leaf()) {
                 out_.nodes[self].child[i] = leaf_entries_;
                 out_.nodes[self].count[i] = c.count;
-                leaf_refs_.push_back({leaf_entries_, c.index, c.count});
-                leaf_entries_ += leaf_entries(N, c.count);
+                leaf_runs_.push_back({leaf_entries_, c.index, c.count});
+                leaf_entries_ += canopy::leaf_entries(N, c.count);
             } else {
                 out_.nodes[self].child[i] = next++;
                 out_.nodes[self].count[i] = 0;
@@ -79,16 +88,10 @@ private:
         out_.nodes[node].count[i] = 0;
     }
 
-public:
-    struct LeafRun {
-        uint32_t first_entry, first_ref, count;
-    };
-    std::vector<LeafRun> leaf_refs_;  // every leaf in emission order, for filling `leaves` in parallel
-    uint32_t leaf_entries_ = 0;
-
-private:
     const Bvh& bvh_;
     WideBvh<N>& out_;
+    std::vector<LeafRun> leaf_runs_;
+    uint32_t leaf_entries_ = 0;
 };
 
 void fill_leaf(LeafTriangle* out, const Bvh& bvh, std::span<const Triangle> triangles, uint32_t first_ref,
@@ -125,9 +128,8 @@ WideBvh<N> collapse(const Bvh& bvh, std::span<const Triangle> triangles) {
     out.bounds = bvh.nodes[0].bounds;
     out.nodes.reserve(bvh.nodes.size() / 2 + 1);
     Collapser<N> collapser(bvh, out);
-    collapser.run();
-    out.leaves.resize(collapser.leaf_entries_);
-    const auto& runs = collapser.leaf_refs_;
+    const std::vector<LeafRun> runs = collapser.run();
+    out.leaves.resize(collapser.leaf_entries());
     parallel::for_each(runs.size(), 4 * 1024, [&](size_t i) {
         fill_leaf(&out.leaves[runs[i].first_entry], bvh, triangles, runs[i].first_ref, runs[i].count);
     });

@@ -22,10 +22,4 @@ struct Hit {
     bool found() const { return prim != kNone; }
 };
 
-// Per-ray values that box tests reuse at every node.
-struct RayBoxData {
-    Vec3 org, inv_dir;
-    explicit RayBoxData(const Ray& ray) : org(ray.org), inv_dir(1.0f / ray.dir.x, 1.0f / ray.dir.y, 1.0f / ray.dir.z) {}
-};
-
 }  // namespace canopy

@@ -43,7 +43,7 @@ struct SlabRay {
     Vec3 org, inv_dir;
     int near[3], far[3];
 
-    explicit SlabRay(const Ray& ray) : org(ray.org), inv_dir(RayBoxData(ray).inv_dir) {
+    explicit SlabRay(const Ray& ray) : org(ray.org), inv_dir(1.0f / ray.dir.x, 1.0f / ray.dir.y, 1.0f / ray.dir.z) {
         for (int a = 0; a < 3; ++a) {
             const bool positive = !std::signbit(inv_dir[a]);
             near[a] = (positive ? 0 : 3 * N) + a * N;
