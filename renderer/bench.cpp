@@ -48,7 +48,10 @@ std::vector<Entry> make_entries(const FlatScene& flat, const BenchOptions& o) {
     std::vector<Entry> entries;
     for (const std::string& builder : o.builders)
         for (const std::string& kernel : o.kernels)
-            entries.push_back({make_canopy_accelerator(flat, {builder, kernel, o.robust, o.watertight})});
+            for (const std::string& traversal : o.traversals)
+                for (const std::string& intersector : o.intersectors)
+                    entries.push_back({make_canopy_accelerator(
+                        flat, {builder, kernel, traversal == "robust", intersector == "watertight"})});
     for (const std::string& quality : o.embree_qualities)
         entries.push_back({make_embree_accelerator(flat, quality, o.threads)});
     return entries;
@@ -69,7 +72,7 @@ nlohmann::json or_null(const std::optional<T>& v) {
 
 void print_table(const std::vector<Entry>& entries, uint64_t tris) {
     const Entry* ref = reference_of(entries);
-    std::printf("\n%-18s %10s %8s %10s %8s %11s %8s %9s %9s %7s %8s %10s",
+    std::printf("\n%-22s %10s %8s %10s %8s %11s %8s %9s %9s %7s %8s %10s",
                 "accelerator", "build ms", "Mprim/s", "frame ms", "Mrays/s", "rays/frame", "SAH", "nodes",
                 "leaves", "refs/t", "MB", "img mean");
     if (ref) std::printf(" %9s %9s", "build/emb", "frame/emb");
@@ -77,7 +80,7 @@ void print_table(const std::vector<Entry>& entries, uint64_t tris) {
     for (const Entry& e : entries) {
         const AcceleratorReport r = e.accel->report();
         const double frame = e.frame_mean();
-        std::printf("%-18s %10.2f %8.2f %10.2f %8.2f %11.0f ", e.label().c_str(), e.build_min(),
+        std::printf("%-22s %10.2f %8.2f %10.2f %8.2f %11.0f ", e.label().c_str(), e.build_min(),
                     double(tris) / e.build_min() / 1e3, frame, e.rays_per_frame() / frame / 1e3, e.rays_per_frame());
         if (r.sah) std::printf("%8.2f ", *r.sah);
         else std::printf("%8s ", "-");

@@ -8,8 +8,8 @@ struct BenchOptions {
     std::string scene;
     std::vector<std::string> builders{"binned"};
     std::vector<std::string> kernels{"auto"};
-    bool robust = true;
-    bool watertight = true;
+    std::vector<std::string> traversals{"robust"};      // robust, fast
+    std::vector<std::string> intersectors{"watertight"};  // watertight, moller
     std::vector<std::string> embree_qualities;  // empty: no Embree rows
     int builds = 20;
     int frames = 10;

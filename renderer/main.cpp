@@ -21,8 +21,8 @@ struct RenderOptions {
     std::string embree_quality = "medium";
     int spp = 1, threads = 0, bounces = 8;
     std::vector<int> size{1024, 768};
-    bool material_albedo = false, fast_traversal = false;
-    std::string intersector = "watertight";
+    bool material_albedo = false;
+    std::string traversal = "robust", intersector = "watertight";
 };
 
 std::string builder_names() {
@@ -42,7 +42,7 @@ void run_render(const RenderOptions& o) {
     const FlatScene flat = flatten(scene);
     std::unique_ptr<Accelerator> accel =
         o.accel == "embree" ? make_embree_accelerator(flat, o.embree_quality, o.threads)
-                            : make_canopy_accelerator(flat, {o.builder, o.kernel, !o.fast_traversal, o.intersector == "watertight"});
+                            : make_canopy_accelerator(flat, {o.builder, o.kernel, o.traversal == "robust", o.intersector == "watertight"});
     const auto start = std::chrono::steady_clock::now();
     accel->prepare();
     accel->build();
@@ -91,7 +91,8 @@ int main(int argc, char** argv) {
     render->add_option("--bounces", r.bounces, "Maximum bounces")->check(CLI::Range(0, 1024))->capture_default_str();
     render->add_option("--threads", threads, "Threads for every library (0: all)")->check(CLI::Range(0, 4096));
     render->add_flag("--materials", r.material_albedo, "Use the .mtl Kd colours as albedo (protocol: 0.8 grey)");
-    render->add_flag("--fast-traversal", r.fast_traversal, "Unpadded slab test (not robust)");
+    render->add_option("--traversal", r.traversal, "robust (padded slab test, Ize 2013) or fast")
+        ->check(CLI::IsMember({"robust", "fast"}))->capture_default_str();
     render->add_option("--intersector", r.intersector, "watertight (Woop et al. 2013) or moller (Möller–Trumbore, fast)")
         ->check(CLI::IsMember({"watertight", "moller"}))->capture_default_str();
 
@@ -112,10 +113,9 @@ int main(int argc, char** argv) {
     bench->add_option("--json", b.json_path, "Write results as JSON");
     bench->add_option("--threads", threads, "Threads for every library (0: all)")->check(CLI::Range(0, 4096));
     bench->add_flag("--materials", b.material_albedo, "Use the .mtl Kd colours as albedo");
-    bool fast = false;
-    std::string intersector = "watertight";
-    bench->add_flag("--fast-traversal", fast, "Unpadded slab test (not robust)");
-    bench->add_option("--intersector", intersector, "watertight (Woop et al. 2013) or moller (Möller–Trumbore, fast)")
+    bench->add_option("--traversal", b.traversals, "Traversal modes: robust, fast")->delimiter(',')
+        ->check(CLI::IsMember({"robust", "fast"}))->capture_default_str();
+    bench->add_option("--intersector", b.intersectors, "Intersectors: watertight, moller (Möller–Trumbore)")->delimiter(',')
         ->check(CLI::IsMember({"watertight", "moller"}))->capture_default_str();
     std::vector<int> bench_size{1024, 768};
     bench->add_option("--size", bench_size, "Width and height")->expected(2)->check(CLI::Range(1, 16384))->capture_default_str();
@@ -129,8 +129,6 @@ int main(int argc, char** argv) {
             run_render(r);
         } else {
             b.threads = threads;
-            b.robust = !fast;
-            b.watertight = intersector == "watertight";
             b.width = bench_size[0], b.height = bench_size[1];
             if (!accels.empty()) b.embree_qualities = qualities;
             run_bench(b);
