@@ -1,7 +1,7 @@
 #include "accel/binned_sah.h"
 
-#include "accel/bvh_compact.h"
 #include "accel/parallel.h"
+#include "accel/sparse_tree.h"
 
 #include <immintrin.h>
 
@@ -138,26 +138,19 @@ class BinnedSahBuilder {
 public:
     BinnedSahBuilder(std::vector<PrimRef>& refs, const BuildSettings& settings)
         : refs_(refs), settings_(settings), bins_(std::clamp<uint32_t>(settings.bins, 2, kMaxBins)),
-          max_leaf_(std::max<uint32_t>(settings.max_leaf_size, 1)),
-          nodes_(static_cast<BvhNode*>(::operator new[](sizeof(BvhNode) * (2 * refs.size() - 1)))) {}
+          max_leaf_(std::max<uint32_t>(settings.max_leaf_size, 1)), nodes_(refs.size()) {}
 
     Bvh build(const Range& root) {
         build_subtree(root, 0, 1, 0);
         Bvh bvh;
         bvh.refs.resize(refs_.size());
         parallel::for_each(refs_.size(), 64 * 1024, [&](size_t i) { bvh.refs[i] = refs_[i].prim; });
-        bvh.nodes = compact_sparse_nodes(nodes_.get());
+        bvh.nodes = nodes_.finish();
         return bvh;
     }
 
 private:
-    struct Deleter {
-        void operator()(BvhNode* p) const { ::operator delete[](p); }
-    };
-
-    // Node slots are reserved by range: a subtree over n refs whose root sits at `node` keeps
-    // its 2n - 2 descendants in [descendants, descendants + 2n - 2), so no two tasks share slots
-    // and the tree does not depend on thread timing. Unused slots are compacted away afterwards.
+    // Builds the subtree over `range` rooted at slot `node` (slots as SparseTree reserves them).
     void build_subtree(const Range& range, uint32_t node, uint32_t descendants, uint32_t depth) {
         const uint32_t n = range.size();
         if (n > 1 && depth < kMedianFallbackDepth && spread(range.centroids) > 0.0f) {
@@ -173,7 +166,7 @@ private:
             }
         }
         if (n <= max_leaf_) {
-            nodes_.get()[node] = {range.bounds.bbox(), range.begin, n};
+            nodes_.set_leaf(node, range.bounds.bbox(), range.begin, n);
         } else {
             split_at_median(range, node, descendants, depth);  // coincident centroids, or too deep
         }
@@ -220,9 +213,8 @@ private:
 
     void emit_children(const Range& left, const Range& right, const Range& parent, uint32_t node,
                        uint32_t descendants, uint32_t depth) {
-        nodes_.get()[node] = {parent.bounds.bbox(), descendants, 0};
-        const uint32_t left_descendants = descendants + 2;
-        const uint32_t right_descendants = left_descendants + 2 * left.size() - 2;
+        const auto [left_descendants, right_descendants] =
+            nodes_.set_inner(node, parent.bounds.bbox(), descendants, left.size());
         parallel::fork_join(
             parent.size(), kParallelSubtreeGrain,
             [&] { build_subtree(left, descendants, left_descendants, depth + 1); },
@@ -232,7 +224,7 @@ private:
     std::vector<PrimRef>& refs_;
     const BuildSettings& settings_;
     const uint32_t bins_, max_leaf_;
-    std::unique_ptr<BvhNode[], Deleter> nodes_;
+    SparseTree nodes_;
 };
 
 }  // namespace

@@ -1,0 +1,141 @@
+#include "accel/sweep_sah.h"
+
+#include "accel/parallel.h"
+#include "accel/sparse_tree.h"
+
+#include <tbb/parallel_sort.h>
+
+#include <array>
+
+namespace canopy {
+namespace {
+
+constexpr size_t kParallelSubtreeGrain = 4 * 1024;
+
+struct Split {
+    int axis = -1;
+    uint32_t position = 0;  // refs at [begin, position) of order[axis] go left
+    float cost = std::numeric_limits<float>::infinity();  // A_left T_left + A_right T_right, half areas
+};
+
+class SweepSahBuilder {
+public:
+    SweepSahBuilder(const std::vector<PrimRef>& refs, const BuildSettings& settings)
+        : refs_(refs), settings_(settings), max_leaf_(std::max<uint32_t>(settings.max_leaf_size, 1)),
+          scratch_(refs.size()), right_area_(refs.size()), goes_left_(refs.size()), nodes_(refs.size()) {
+        for (int axis = 0; axis < 3; ++axis) sort_by_centroid(axis);
+    }
+
+    Bvh build() {
+        BBox bounds;
+        for (const PrimRef& r : refs_) bounds.extend(r.bounds());
+        build_subtree(0, uint32_t(refs_.size()), bounds, 0, 1, 0);
+        Bvh bvh;
+        bvh.refs.resize(refs_.size());
+        parallel::for_each(refs_.size(), 64 * 1024, [&](size_t i) { bvh.refs[i] = refs_[order_[0][i]].prim; });
+        bvh.nodes = nodes_.finish();
+        return bvh;
+    }
+
+private:
+    float centroid(uint32_t ref, int axis) const { return refs_[ref].lower[axis] + refs_[ref].upper[axis]; }
+
+    // Ties are broken by index so that the order, and with it the tree, is the same on every run.
+    void sort_by_centroid(int axis) {
+        std::vector<uint32_t>& order = order_[axis];
+        order.resize(refs_.size());
+        for (uint32_t i = 0; i < order.size(); ++i) order[i] = i;
+        tbb::parallel_sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) {
+            const float ca = centroid(a, axis), cb = centroid(b, axis);
+            return ca < cb || (ca == cb && a < b);
+        });
+    }
+
+    // The sweep (MacDonald and Booth, sec. 3): right-to-left areas first, then left to right.
+    Split best_split(uint32_t begin, uint32_t end) {
+        Split best;
+        for (int axis = 0; axis < 3; ++axis) {
+            const std::vector<uint32_t>& order = order_[axis];
+            BBox right;
+            for (uint32_t i = end; i-- > begin + 1;) {
+                right.extend(refs_[order[i]].bounds());
+                right_area_[i] = right.half_area() * settings_.leaf_tests(end - i);
+            }
+            BBox left;
+            for (uint32_t i = begin + 1; i < end; ++i) {
+                left.extend(refs_[order[i - 1]].bounds());
+                const float cost = left.half_area() * settings_.leaf_tests(i - begin) + right_area_[i];
+                if (cost < best.cost) best = {axis, i, cost};
+            }
+        }
+        return best;
+    }
+
+    void build_subtree(uint32_t begin, uint32_t end, const BBox& bounds, uint32_t node, uint32_t descendants,
+                       uint32_t depth) {
+        const uint32_t n = end - begin;
+        if (n == 1) return nodes_.set_leaf(node, bounds, begin, n);
+        Split split;
+        if (depth < kMedianFallbackDepth) {
+            split = best_split(begin, end);
+            const float area = bounds.half_area();
+            const float split_cost = settings_.costs.inner * area + settings_.costs.triangle * split.cost;
+            if (n <= max_leaf_ && settings_.costs.triangle * settings_.leaf_tests(n) * area <= split_cost)
+                return nodes_.set_leaf(node, bounds, begin, n);
+        } else if (n <= max_leaf_) {
+            return nodes_.set_leaf(node, bounds, begin, n);
+        } else {
+            split = {bounds.largest_axis(), begin + n / 2, 0.0f};  // too deep: cut at the median
+        }
+        partition(begin, end, split);
+        const auto [left_descendants, right_descendants] =
+            nodes_.set_inner(node, bounds, descendants, split.position - begin);
+        const BBox left = bounds_of(begin, split.position), right = bounds_of(split.position, end);
+        parallel::fork_join(
+            n, kParallelSubtreeGrain,
+            [&, left_descendants = left_descendants] {
+                build_subtree(begin, split.position, left, descendants, left_descendants, depth + 1);
+            },
+            [&, right_descendants = right_descendants] {
+                build_subtree(split.position, end, right, descendants + 1, right_descendants, depth + 1);
+            });
+    }
+
+    // Splits [begin, end) of every order at the split: the other two orders are partitioned stably by which
+    // side each ref went to, so each keeps its sort within both children.
+    void partition(uint32_t begin, uint32_t end, const Split& split) {
+        const std::vector<uint32_t>& chosen = order_[split.axis];
+        for (uint32_t i = begin; i < end; ++i) goes_left_[chosen[i]] = i < split.position;
+        for (int axis = 0; axis < 3; ++axis) {
+            if (axis == split.axis) continue;
+            std::vector<uint32_t>& order = order_[axis];
+            uint32_t left = begin, right = split.position;
+            for (uint32_t i = begin; i < end; ++i) scratch_[goes_left_[order[i]] ? left++ : right++] = order[i];
+            std::copy(scratch_.begin() + begin, scratch_.begin() + end, order.begin() + begin);
+        }
+    }
+
+    BBox bounds_of(uint32_t begin, uint32_t end) const {
+        BBox b;
+        for (uint32_t i = begin; i < end; ++i) b.extend(refs_[order_[0][i]].bounds());
+        return b;
+    }
+
+    const std::vector<PrimRef>& refs_;
+    const BuildSettings& settings_;
+    const uint32_t max_leaf_;
+    std::array<std::vector<uint32_t>, 3> order_;
+    std::vector<uint32_t> scratch_;    // by position: subtrees use disjoint ranges
+    std::vector<float> right_area_;    // by position
+    std::vector<uint8_t> goes_left_;   // by ref: subtrees hold disjoint refs
+    SparseTree nodes_;
+};
+
+}  // namespace
+
+Bvh build_sweep_sah(BuildInput&& input, const BuildSettings& settings) {
+    if (input.refs.empty()) return {};
+    return SweepSahBuilder(input.refs, settings).build();
+}
+
+}  // namespace canopy
