@@ -1,5 +1,6 @@
 #include "accel/builder.h"
 #include "accel/binned_sah.h"
+#include "accel/lbvh.h"
 #include "accel/sweep_sah.h"
 
 #include <stdexcept>
@@ -9,6 +10,7 @@ namespace canopy {
 const std::vector<BuilderEntry>& builders() {
     static const std::vector<BuilderEntry> registry = {
         {"binned", "parallel binned SAH (Wald 2007), leaves by SAH termination", &build_binned_sah},
+        {"lbvh", "linear BVH: Morton codes, radix sort, Karras 2012 hierarchy; one triangle per leaf", &build_lbvh},
         {"sweep", "full sweep SAH (MacDonald and Booth 1990), leaves by SAH termination", &build_sweep_sah},
     };
     return registry;
