@@ -2,6 +2,7 @@
 // An accelerator as the renderer and the benchmark see it: built from a flat scene, then asked to
 // render frames. The virtual call is per frame; inside, each implementation runs the path tracer
 // template over its own tracer type, so no per-ray dispatch is paid.
+#include "kernels/traverse.h"
 #include "renderer/path_tracer.h"
 
 #include <memory>
@@ -32,6 +33,9 @@ public:
     virtual AcceleratorReport report() const = 0;
     // One closest-hit query, for tests and tools; frames go through render().
     virtual Hit trace(const Ray& ray) const = 0;
+    // The same query through the counting variant of the kernel: what the ray visited. Throws
+    // std::invalid_argument for an accelerator that cannot count (Embree).
+    virtual TraversalCounts count(const Ray& ray) const = 0;
 };
 
 struct CanopyOptions {

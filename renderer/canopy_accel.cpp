@@ -82,6 +82,19 @@ public:
         return hit;
     }
 
+    TraversalCounts count(const Ray& ray) const override {
+        TraversalCounts counts;
+        std::visit([&](const auto& bvh) {
+            if constexpr (kernel_compiled(std::decay_t<decltype(bvh)>::kWidth)) {
+                with_modes(options_, [&](auto robust, auto test) {
+                    Hit hit;
+                    return traverse<Query::Closest, decltype(robust)::value, typename decltype(test)::type>(bvh, ray, hit, counts);
+                });
+            }
+        }, layout_);
+        return counts;
+    }
+
     AcceleratorReport report() const override {
         const TreeStats stats = tree_stats(binary_, scene_.triangles.size());
         const uint64_t bytes = std::visit([](const auto& bvh) { return bvh.bytes(); }, layout_);

@@ -2,6 +2,7 @@
 #include "accel/builder.h"
 #include "renderer/accelerator.h"
 #include "renderer/bench.h"
+#include "renderer/heatmap.h"
 
 #include <CLI/CLI.hpp>
 #include <tbb/global_control.h>
@@ -21,7 +22,7 @@ struct RenderOptions {
     std::string embree_quality = "medium";
     int spp = 1, threads = 0, bounces = 8;
     std::vector<int> size{1024, 768};
-    bool material_albedo = false;
+    bool material_albedo = false, heatmap = false;
     std::string traversal = "robust", intersector = "watertight";
 };
 
@@ -47,6 +48,14 @@ void run_render(const RenderOptions& o) {
     accel->prepare();
     accel->build();
     const double build_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+    if (o.heatmap) {
+        const PinholeCamera camera(scene.camera ? *scene.camera : auto_camera(flat.bounds), o.size[0], o.size[1]);
+        const HeatmapStats h = write_heatmap(*accel, camera, o.size[0], o.size[1], o.output);
+        std::printf("%s %s: per primary ray %.1f inner nodes, %.1f leaves, %.1f triangles; PNG top colour = cost %.0f -> %s\n",
+                    o.builder.c_str(), accel->kernel().c_str(), h.mean_inner, h.mean_leaves, h.mean_triangles,
+                    h.cost_p99, o.output.c_str());
+        return;
+    }
 
     FrameSettings settings;
     settings.width = o.size[0], settings.height = o.size[1], settings.max_bounces = o.bounces;
@@ -91,6 +100,8 @@ int main(int argc, char** argv) {
     render->add_option("--bounces", r.bounces, "Maximum bounces")->check(CLI::Range(0, 1024))->capture_default_str();
     render->add_option("--threads", threads, "Threads for every library (0: all)")->check(CLI::Range(0, 4096));
     render->add_flag("--materials", r.material_albedo, "Use the .mtl Kd colours as albedo (protocol: 0.8 grey)");
+    render->add_flag("--heatmap", r.heatmap,
+                     "Instead of rendering, write what primary rays visit: EXR channels inner, leaves, triangles, and a false-colour PNG beside it");
     render->add_option("--traversal", r.traversal, "robust (padded slab test, Ize 2013) or fast")
         ->check(CLI::IsMember({"robust", "fast"}))->capture_default_str();
     render->add_option("--intersector", r.intersector, "watertight (Woop et al. 2013) or moller (Möller–Trumbore, fast)")

@@ -2,6 +2,7 @@
 #include "oracle.h"
 #include "renderer/accelerator.h"
 #include "renderer/bench.h"
+#include "renderer/heatmap.h"
 
 #include <OpenImageIO/imageio.h>
 #include <nlohmann/json.hpp>
@@ -216,4 +217,33 @@ TEST_CASE("bench writes the documented JSON", "[bench][embree]") {
     CHECK(j["results"][1]["sah"].is_null());
     CHECK(j["results"][0]["image_mean"].get<double>() ==
           Approx(j["results"][1]["image_mean"].get<double>()).epsilon(0.02));
+}
+
+TEST_CASE("heatmaps hold what the counting kernel reports per pixel", "[render][heatmap]") {
+    const Scene scene = load_scene("gen:box?tris=3000&seed=4");
+    const FlatScene flat = flatten(scene);
+    const PinholeCamera camera(*scene.camera, 40, 30);
+    const std::string path = (std::filesystem::temp_directory_path() / "canopy_test_heatmap.exr").string();
+    const auto accel = built(make_canopy_accelerator(flat, {}));
+    const HeatmapStats stats = write_heatmap(*accel, camera, 40, 30, path);
+    auto in = OIIO::ImageInput::open(path);
+    REQUIRE(in);
+    CHECK(in->spec().channelnames == std::vector<std::string>{"inner", "leaves", "triangles"});
+    std::vector<float> counts(40 * 30 * 3);
+    REQUIRE(in->read_image(0, 0, 0, 3, OIIO::TypeDesc::FLOAT, counts.data()));
+    double inner = 0;
+    for (int y = 0; y < 30; ++y)
+        for (int x = 0; x < 40; ++x) {
+            const TraversalCounts c = accel->count(camera.generate(x, y, 0.5f, 0.5f));
+            const float* p = &counts[size_t(y * 40 + x) * 3];
+            CHECK(p[0] == float(c.inner_nodes));
+            CHECK(p[1] == float(c.leaf_nodes));
+            CHECK(p[2] == float(c.triangle_tests));
+            inner += p[0];
+        }
+    CHECK(stats.mean_inner == Approx(inner / (40 * 30)));
+    CHECK(stats.mean_inner >= 1.0);  // every ray tests the root
+    CHECK(std::filesystem::exists(std::filesystem::path(path).replace_extension(".png")));
+    const auto embree = built(make_embree_accelerator(flat, "medium", 0));
+    CHECK_THROWS_WITH(write_heatmap(*embree, camera, 40, 30, path), Catch::Contains("canopy kernel"));
 }
