@@ -12,7 +12,7 @@
 namespace canopy {
 
 struct AcceleratorReport {
-    std::optional<double> sah;
+    std::optional<double> sah, epo;  // eq. 1 and eq. 3 of the quality-metrics paper, of the binary tree
     std::optional<uint64_t> nodes, leaves, depth, bytes;
     std::optional<double> refs_per_tri;
 };

@@ -1,4 +1,5 @@
 #include "accel/builder.h"
+#include "accel/metrics.h"
 #include "kernels/dispatch.h"
 #include "kernels/traverse.h"
 #include "renderer/accelerator.h"
@@ -98,7 +99,8 @@ public:
     AcceleratorReport report() const override {
         const TreeStats stats = tree_stats(binary_, scene_.triangles.size());
         const uint64_t bytes = std::visit([](const auto& bvh) { return bvh.bytes(); }, layout_);
-        return {sah_cost(binary_, SahCosts{}), stats.nodes, stats.leaves, stats.depth, bytes, stats.refs_per_triangle};
+        return {sah_cost(binary_, SahCosts{}), epo_cost(binary_, scene_.triangles), stats.nodes, stats.leaves,
+                stats.depth, bytes, stats.refs_per_triangle};
     }
 
 private:

@@ -1,0 +1,19 @@
+#pragma once
+// Tree quality metrics beyond SAH (eq. 1, in bvh.h): end-point overlap (eq. 3 of Aila, Karras and Laine
+// 2013, "On Quality Metrics of Bounding Volume Hierarchies").
+#include "accel/bvh.h"
+
+#include <span>
+
+namespace canopy {
+
+// Area of the part of triangle t inside box b (the triangle clipped to the box's six planes).
+double clipped_area(const Triangle& t, const BBox& b);
+
+// Eq. 3: sum over nodes n of C_n * A((S \ Q(n)) intersected with n) / A(S), where Q(n) are the triangles
+// referenced in n's subtree and C_n is C_inn for inner nodes and C_tri T_n for leaves. Exact: every triangle
+// is clipped to every node box it overlaps. A triangle referenced by several leaves (split references)
+// belongs to every subtree that holds one of its references.
+double epo_cost(const Bvh& bvh, std::span<const Triangle> triangles, SahCosts costs = {});
+
+}  // namespace canopy
