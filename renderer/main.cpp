@@ -3,6 +3,7 @@
 #include "renderer/accelerator.h"
 #include "renderer/bench.h"
 #include "renderer/heatmap.h"
+#include "renderer/study.h"
 
 #include <CLI/CLI.hpp>
 #include <tbb/global_control.h>
@@ -131,6 +132,17 @@ int main(int argc, char** argv) {
     std::vector<int> bench_size{1024, 768};
     bench->add_option("--size", bench_size, "Width and height")->expected(2)->check(CLI::Range(1, 16384))->capture_default_str();
 
+    StudyOptions st;
+    std::vector<int> study_size{256, 192};
+    CLI::App* study = app.add_subcommand("study", "SAH, EPO and LCV against measured ns/ray for every builder (Aila et al. 2013)");
+    study->add_option("scenes", st.scenes, "Scenes: scene.json, .obj or gen:NAME?tris=N&seed=S")->required();
+    study->add_option("--builder", st.builders, "Builders (default: all): " + builder_names())->delimiter(',');
+    study->add_option("--size", study_size, "Width and height of the frame whose diffuse rays are timed")
+        ->expected(2)->check(CLI::Range(1, 16384))->capture_default_str();
+    study->add_option("--repeats", st.repeats, "Timing passes per tree (fastest kept)")->check(CLI::Range(1, 100))->capture_default_str();
+    study->add_option("--json", st.json_path, "Write results as JSON");
+    study->add_option("--plot", st.plot_path, "Write a PNG: predicted (eq. 7) against measured SIMD ns/ray, a panel per scene");
+
     CLI11_PARSE(app, argc, argv);
     std::optional<tbb::global_control> limit;
     if (threads > 0) limit.emplace(tbb::global_control::max_allowed_parallelism, size_t(threads));
@@ -138,6 +150,10 @@ int main(int argc, char** argv) {
         if (*render) {
             r.threads = threads;
             run_render(r);
+        } else if (*study) {
+            for (const std::string& b : st.builders) find_builder(b);  // unknown names fail before any work
+            st.width = study_size[0], st.height = study_size[1];
+            run_study(st);
         } else {
             b.threads = threads;
             b.width = bench_size[0], b.height = bench_size[1];

@@ -1,6 +1,12 @@
 // Tree quality metrics against hand-computed values.
 #include "accel/metrics.h"
 #include "oracle.h"
+#include "renderer/study.h"
+
+#include <nlohmann/json.hpp>
+
+#include <filesystem>
+#include <fstream>
 
 #include <tbb/global_control.h>
 
@@ -73,4 +79,45 @@ TEST_CASE("EPO of built trees is positive, and the same with 1 and 2 threads", "
         CHECK(one > 0.0);  // large overlapping triangles
         CHECK(one == two);
     }
+}
+
+TEST_CASE("LCV is the standard deviation of leaves visited per ray", "[metrics]") {
+    // Two triangles in the plane z = 0. Straight down onto the first; along +x inside the plane (no triangle is
+    // hit, every flat leaf box is touched); away from everything. With a leaf each (scalar build) the rays
+    // visit 1, 2 and 0 leaves: sd = sqrt(2/3). The SIMD build puts both in one 4-wide leaf: 1, 1, 0, sd = sqrt(2/9).
+    FlatScene flat;
+    flat.triangles = {{Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0)}, {Vec3(10, 0, 0), Vec3(11, 0, 0), Vec3(10, 1, 0)}};
+    const std::vector<Ray> rays{{{0.2f, 0.2f, 1.0f}, {0, 0, -1}}, {{-1.0f, 0.2f, 0.0f}, {1, 0, 0}}, {{0, 0, 5}, {0, 0, 1}}};
+    for (const char* kernel : {"bvh2", "auto"}) {
+        auto accel = make_canopy_accelerator(flat, {"binned", kernel});
+        accel->prepare();
+        accel->build();
+        const uint64_t leaves = *accel->report().leaves;
+        INFO(kernel << ", " << leaves << " leaves");
+        REQUIRE((leaves == 1 || leaves == 2));
+        CHECK(leaf_count_variability(*accel, rays) == Approx(std::sqrt(leaves == 2 ? 2.0 / 3.0 : 2.0 / 9.0)));
+    }
+}
+
+TEST_CASE("study writes the documented JSON", "[metrics][study]") {
+    const std::string path = (std::filesystem::temp_directory_path() / "canopy_test_study.json").string();
+    StudyOptions o;
+    o.scenes = {"gen:box?tris=2000&seed=3", "gen:triangles?tris=500&seed=3"};
+    o.width = 24, o.height = 16, o.repeats = 1, o.json_path = path;
+    run_study(o);
+    std::ifstream in(path);
+    const nlohmann::json j = nlohmann::json::parse(in);
+    REQUIRE(j["scenes"].size() == 2);
+    for (const auto& s : j["scenes"]) {
+        CHECK(s["builders"].size() == builders().size());
+        for (const auto& b : s["builders"])
+            for (const char* key : {"builder", "sah", "epo", "lcv", "scalar_ns_per_ray", "simd_ns_per_ray"}) CHECK(b.contains(key));
+        for (const char* key : {"sah", "sah_epo", "sah_epo_lcv"}) {
+            REQUIRE(s["correlation"].contains(key));
+            if (s["correlation"][key].is_number()) CHECK(std::abs(s["correlation"][key].get<double>()) <= 1.0 + 1e-9);
+        }
+        CHECK(s["alpha"].get<double>() + s["beta"].get<double>() <= 1.0 + 1e-9);
+    }
+    CHECK(j["fixed"].contains("alpha"));
+    CHECK(j["fixed"].contains("beta"));
 }

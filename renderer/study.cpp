@@ -1,0 +1,279 @@
+#include "renderer/study.h"
+
+#include "accel/builder.h"
+#include "renderer/accelerator.h"
+
+#include <OpenImageIO/imageio.h>
+#include <nlohmann/json.hpp>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <optional>
+
+namespace canopy {
+namespace {
+
+struct Row {
+    std::string builder;
+    double scalar_sah = 0, scalar_epo = 0, scalar_ns = 0;       // binary tree, scalar kernel
+    double sah = 0, epo = 0, lcv = 0, simd_ns = 0;              // the widest kernel's tree
+};
+
+// Records every ray a tracer is asked for, and answers with the accelerator's hit.
+struct RecordingTracer {
+    const Accelerator& accel;
+    std::vector<Ray>& rays;
+    bool closest(const Ray& ray, Hit& hit) const {
+        rays.push_back(ray);
+        hit = accel.trace(ray);
+        return hit.found();
+    }
+};
+
+// The diffuse rays of one protocol frame (sample 0), traced single-threaded so their order is fixed.
+std::vector<Ray> diffuse_rays(const Accelerator& reference, const FlatScene& flat, const PinholeCamera& camera, int w, int h) {
+    std::vector<Ray> rays;
+    FrameSettings settings;
+    settings.width = w, settings.height = h;
+    const ShadingScene shading{flat, settings};
+    const RecordingTracer tracer{reference, rays};
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+            Rng rng(uint64_t(y) * uint64_t(w) + uint64_t(x), 0);
+            uint64_t count = 0;
+            const float u = rng.next_float(), v = rng.next_float();
+            trace_path(tracer, shading, camera.generate(x, y, u, v), rng, count);
+        }
+    return rays;
+}
+
+// Single-threaded nanoseconds per ray, the fastest of `repeats` passes.
+double ns_per_ray(const Accelerator& accel, const std::vector<Ray>& rays, int repeats) {
+    double best = std::numeric_limits<double>::infinity();
+    uint64_t hits = 0;
+    for (int r = 0; r < repeats; ++r) {
+        const auto start = std::chrono::steady_clock::now();
+        for (const Ray& ray : rays) hits += accel.trace(ray).found();
+        best = std::min(best, std::chrono::duration<double, std::nano>(std::chrono::steady_clock::now() - start).count());
+    }
+    return hits == 0 && rays.empty() ? 0.0 : best / double(rays.size());
+}
+
+// Eq. 5, Pearson's correlation; none when either side does not vary.
+std::optional<double> pearson(const std::vector<double>& x, const std::vector<double>& y) {
+    const double n = double(x.size());
+    double mx = 0, my = 0;
+    for (size_t i = 0; i < x.size(); ++i) mx += x[i] / n, my += y[i] / n;
+    double sxy = 0, sxx = 0, syy = 0;
+    for (size_t i = 0; i < x.size(); ++i) {
+        sxy += (x[i] - mx) * (y[i] - my), sxx += (x[i] - mx) * (x[i] - mx), syy += (y[i] - my) * (y[i] - my);
+    }
+    if (sxx <= 0 || syy <= 0) return std::nullopt;
+    return sxy / std::sqrt(sxx * syy);
+}
+
+// (1 - alpha - beta) SAH + alpha EPO + beta LCV: eq. 7, and eq. 6 with beta = 0.
+std::vector<double> predicted(const std::vector<Row>& rows, bool scalar, double alpha, double beta) {
+    std::vector<double> p;
+    for (const Row& r : rows)
+        p.push_back(scalar ? (1 - alpha) * r.scalar_sah + alpha * r.scalar_epo
+                           : (1 - alpha - beta) * r.sah + alpha * r.epo + beta * r.lcv);
+    return p;
+}
+
+std::vector<double> measured(const std::vector<Row>& rows, bool scalar) {
+    std::vector<double> m;
+    for (const Row& r : rows) m.push_back(scalar ? r.scalar_ns : r.simd_ns);
+    return m;
+}
+
+struct Fit {
+    double alpha = 0, beta = 0;
+    std::optional<double> correlation;
+};
+
+constexpr int kGridSteps = 100;  // alpha and beta in steps of 0.01
+
+// The weights of eq. 6 (with_lcv false) or eq. 7 that maximise the correlation, over a 0.01 grid.
+Fit best_fit(const std::vector<Row>& rows, bool scalar, bool with_lcv) {
+    Fit best;
+    for (int a = 0; a <= kGridSteps; ++a)
+        for (int b = 0; b <= (with_lcv ? kGridSteps - a : 0); ++b) {
+            const double alpha = a / double(kGridSteps), beta = b / double(kGridSteps);
+            const auto c = pearson(predicted(rows, scalar, alpha, beta), measured(rows, scalar));
+            if (c && (!best.correlation || *c > *best.correlation)) best = {alpha, beta, c};
+        }
+    return best;
+}
+
+struct SceneResult {
+    std::string scene;
+    std::vector<Row> rows;
+    std::optional<double> scalar_sah, simd_sah;
+    Fit scalar_epo, simd_epo, simd_lcv;
+};
+
+std::string corr(const std::optional<double>& c) {
+    char text[32];
+    std::snprintf(text, sizeof text, "%.3f", c ? *c : std::nan(""));
+    return c ? text : "  -  ";
+}
+
+nlohmann::json json_or_null(const std::optional<double>& c) { return c ? nlohmann::json(*c) : nlohmann::json(nullptr); }
+
+// Table 2's fixed parameters: the (alpha, beta) with the best average correlation over all scenes.
+Fit fixed_fit(const std::vector<SceneResult>& results, bool scalar, bool with_lcv) {
+    Fit best;
+    for (int a = 0; a <= kGridSteps; ++a)
+        for (int b = 0; b <= (with_lcv ? kGridSteps - a : 0); ++b) {
+            double sum = 0;
+            int counted = 0;
+            for (const SceneResult& s : results)
+                if (auto c = pearson(predicted(s.rows, scalar, a / double(kGridSteps), b / double(kGridSteps)),
+                                     measured(s.rows, scalar)))
+                    sum += *c, ++counted;
+            if (counted && (!best.correlation || sum / counted > *best.correlation))
+                best = {a / double(kGridSteps), b / double(kGridSteps), sum / counted};
+        }
+    return best;
+}
+
+void print_tables(const std::vector<SceneResult>& results, const Fit& fixed_scalar, const Fit& fixed_simd) {
+    std::printf("\nTable 1: per-scene correlation of predicted cost with measured ns/ray (Pearson, eq. 5)\n");
+    std::printf("%-28s %9s | %7s %14s | %7s %14s %20s\n", "scene", "builders", "scalar", "scalar", "SIMD", "SIMD", "SIMD");
+    std::printf("%-28s %9s | %7s %14s | %7s %14s %20s\n", "", "", "SAH", "SAH+EPO (a)", "SAH", "SAH+EPO (a)", "SAH+EPO+LCV (a,b)");
+    for (const SceneResult& s : results)
+        std::printf("%-28s %9zu | %7s %7s (%.2f) | %7s %7s (%.2f) %11s (%.2f,%.2f)\n", s.scene.c_str(), s.rows.size(),
+                    corr(s.scalar_sah).c_str(), corr(s.scalar_epo.correlation).c_str(), s.scalar_epo.alpha,
+                    corr(s.simd_sah).c_str(), corr(s.simd_epo.correlation).c_str(), s.simd_epo.alpha,
+                    corr(s.simd_lcv.correlation).c_str(), s.simd_lcv.alpha, s.simd_lcv.beta);
+    auto summary = [&](const char* name, auto get) {
+        double sum = 0, low = 1;
+        int n = 0;
+        for (const SceneResult& s : results)
+            if (auto c = get(s)) sum += *c, low = std::min(low, *c), ++n;
+        if (n) std::printf("  %-34s average %.3f, minimum %.3f over %d scenes\n", name, sum / n, low, n);
+    };
+    std::printf("\nTable 2: aggregate correlations\n");
+    summary("scalar SAH", [](const SceneResult& s) { return s.scalar_sah; });
+    summary("scalar SAH+EPO (per-scene a)", [](const SceneResult& s) { return s.scalar_epo.correlation; });
+    summary("SIMD SAH", [](const SceneResult& s) { return s.simd_sah; });
+    summary("SIMD SAH+EPO (per-scene a)", [](const SceneResult& s) { return s.simd_epo.correlation; });
+    summary("SIMD SAH+EPO+LCV (per-scene a,b)", [](const SceneResult& s) { return s.simd_lcv.correlation; });
+    std::printf("  fixed over all scenes: scalar SAH+EPO a = %.2f (average %s); SIMD SAH+EPO+LCV a = %.2f, b = %.2f (average %s)\n",
+                fixed_scalar.alpha, corr(fixed_scalar.correlation).c_str(), fixed_simd.alpha, fixed_simd.beta,
+                corr(fixed_simd.correlation).c_str());
+}
+
+// One panel per scene: predicted SIMD cost (eq. 7 with the scene's fit) against measured SIMD ns/ray,
+// both scaled to the panel, one white square per builder, on a grey diagonal.
+void write_plot(const std::vector<SceneResult>& results, const std::string& path) {
+    constexpr int kPanel = 240, kMargin = 20;
+    const int width = kPanel * int(results.size()), height = kPanel;
+    std::vector<uint8_t> rgb(size_t(width) * size_t(height) * 3, 24);
+    auto put = [&](int x, int y, uint8_t v) {
+        if (x >= 0 && x < width && y >= 0 && y < height)
+            for (int k = 0; k < 3; ++k) rgb[(size_t(y) * size_t(width) + size_t(x)) * 3 + size_t(k)] = v;
+    };
+    for (size_t s = 0; s < results.size(); ++s) {
+        const int x0 = int(s) * kPanel;
+        const std::vector<double> p = predicted(results[s].rows, false, results[s].simd_lcv.alpha, results[s].simd_lcv.beta);
+        const std::vector<double> m = measured(results[s].rows, false);
+        const auto [pmin, pmax] = std::minmax_element(p.begin(), p.end());
+        const auto [mmin, mmax] = std::minmax_element(m.begin(), m.end());
+        const int span = kPanel - 2 * kMargin;
+        for (int i = 0; i <= span; ++i) put(x0 + kMargin + i, kPanel - kMargin - i, 90);  // the diagonal
+        for (int i = 0; i <= span; ++i) put(x0 + kMargin + i, kPanel - kMargin, 160), put(x0 + kMargin, kMargin + i, 160);
+        for (size_t i = 0; i < p.size(); ++i) {
+            const double px = *pmax > *pmin ? (p[i] - *pmin) / (*pmax - *pmin) : 0.5;
+            const double my = *mmax > *mmin ? (m[i] - *mmin) / (*mmax - *mmin) : 0.5;
+            const int cx = x0 + kMargin + int(px * span), cy = kPanel - kMargin - int(my * span);
+            for (int dy = -3; dy <= 3; ++dy)
+                for (int dx = -3; dx <= 3; ++dx) put(cx + dx, cy + dy, 255);
+        }
+    }
+    auto out = OIIO::ImageOutput::create(path);
+    OIIO::ImageSpec spec(width, height, 3, OIIO::TypeDesc::UINT8);
+    if (!out || !out->open(path, spec) || !out->write_image(OIIO::TypeDesc::UINT8, rgb.data()) || !out->close())
+        throw std::runtime_error(path + ": cannot write the plot");
+}
+
+}  // namespace
+
+double leaf_count_variability(const Accelerator& accel, const std::vector<Ray>& rays) {
+    double sum = 0, sum2 = 0;
+    for (const Ray& ray : rays) {
+        const double leaves = double(accel.count(ray).leaf_nodes);
+        sum += leaves, sum2 += leaves * leaves;
+    }
+    const double mean = sum / double(rays.size());
+    return std::sqrt(std::max(0.0, sum2 / double(rays.size()) - mean * mean));
+}
+
+void run_study(const StudyOptions& o) {
+    std::vector<std::string> names = o.builders;
+    if (names.empty())
+        for (const BuilderEntry& b : builders()) names.push_back(b.name);
+    std::vector<SceneResult> results;
+    for (const std::string& scene_name : o.scenes) {
+        const Scene scene = load_scene(scene_name);
+        const FlatScene flat = flatten(scene);
+        const PinholeCamera camera(scene.camera ? *scene.camera : auto_camera(flat.bounds), o.width, o.height);
+        auto reference = make_canopy_accelerator(flat, {"binned", "auto"});
+        reference->prepare();
+        reference->build();
+        const std::vector<Ray> rays = diffuse_rays(*reference, flat, camera, o.width, o.height);
+        std::printf("%s: %zu triangles, %zu diffuse rays (%dx%d, %d bounces)\n", scene_name.c_str(), flat.triangles.size(),
+                    rays.size(), o.width, o.height, FrameSettings{}.max_bounces);
+        SceneResult result{scene.name.empty() ? scene_name : scene.name, {}, {}, {}, {}, {}, {}};
+        for (const std::string& name : names) {
+            auto scalar = make_canopy_accelerator(flat, {name, "bvh2"});
+            auto simd = make_canopy_accelerator(flat, {name, "auto"});
+            for (Accelerator* a : {scalar.get(), simd.get()}) a->prepare(), a->build();
+            const AcceleratorReport rs = scalar->report(), rw = simd->report();
+            Row row{name, *rs.sah, *rs.epo, ns_per_ray(*scalar, rays, o.repeats),
+                    *rw.sah, *rw.epo, leaf_count_variability(*simd, rays), ns_per_ray(*simd, rays, o.repeats)};
+            std::printf("  %-8s scalar: SAH %7.2f EPO %7.2f %7.1f ns/ray | %s: SAH %7.2f EPO %7.2f LCV %6.2f %7.1f ns/ray\n",
+                        name.c_str(), row.scalar_sah, row.scalar_epo, row.scalar_ns, simd->kernel().c_str(), row.sah,
+                        row.epo, row.lcv, row.simd_ns);
+            result.rows.push_back(row);
+        }
+        result.scalar_sah = pearson(predicted(result.rows, true, 0, 0), measured(result.rows, true));
+        result.simd_sah = pearson(predicted(result.rows, false, 0, 0), measured(result.rows, false));
+        result.scalar_epo = best_fit(result.rows, true, false);
+        result.simd_epo = best_fit(result.rows, false, false);
+        result.simd_lcv = best_fit(result.rows, false, true);
+        results.push_back(result);
+    }
+    const Fit fixed_scalar = fixed_fit(results, true, false), fixed_simd = fixed_fit(results, false, true);
+    print_tables(results, fixed_scalar, fixed_simd);
+    if (!o.plot_path.empty()) write_plot(results, o.plot_path), std::printf("wrote %s\n", o.plot_path.c_str());
+    if (o.json_path.empty()) return;
+    nlohmann::json scenes = nlohmann::json::array();
+    for (const SceneResult& s : results) {
+        nlohmann::json rows = nlohmann::json::array();
+        for (const Row& r : s.rows)
+            rows.push_back({{"builder", r.builder}, {"sah", r.sah}, {"epo", r.epo}, {"lcv", r.lcv},
+                            {"scalar_ns_per_ray", r.scalar_ns}, {"simd_ns_per_ray", r.simd_ns},
+                            {"scalar_sah", r.scalar_sah}, {"scalar_epo", r.scalar_epo}});
+        scenes.push_back({{"scene", s.scene}, {"builders", rows},
+                          {"correlation", {{"sah", json_or_null(s.simd_sah)}, {"sah_epo", json_or_null(s.simd_epo.correlation)},
+                                           {"sah_epo_lcv", json_or_null(s.simd_lcv.correlation)}}},
+                          {"scalar_correlation", {{"sah", json_or_null(s.scalar_sah)},
+                                                  {"sah_epo", json_or_null(s.scalar_epo.correlation)}, {"alpha", s.scalar_epo.alpha}}},
+                          {"alpha", s.simd_lcv.alpha}, {"beta", s.simd_lcv.beta}});
+    }
+    const nlohmann::json j{{"scenes", scenes},
+                           {"fixed", {{"alpha", fixed_simd.alpha}, {"beta", fixed_simd.beta},
+                                      {"average_correlation", json_or_null(fixed_simd.correlation)},
+                                      {"scalar_alpha", fixed_scalar.alpha},
+                                      {"scalar_average_correlation", json_or_null(fixed_scalar.correlation)}}}};
+    std::ofstream out(o.json_path);
+    out << j.dump(2) << "\n";
+    if (!out) throw std::runtime_error(o.json_path + ": cannot write the study JSON");
+    std::printf("wrote %s\n", o.json_path.c_str());
+}
+
+}  // namespace canopy

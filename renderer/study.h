@@ -1,0 +1,23 @@
+#pragma once
+// `canopy study`: the correlation study of Aila, Karras and Laine 2013 (Tables 1 and 2) for canopy's builders.
+#include "renderer/accelerator.h"
+
+#include <string>
+#include <vector>
+
+namespace canopy {
+
+struct StudyOptions {
+    std::vector<std::string> scenes;
+    std::vector<std::string> builders;  // empty: every registered builder
+    int width = 256, height = 192;      // resolution of the frame whose diffuse rays are timed
+    int repeats = 3;                    // timings per tree; the fastest is kept
+    std::string json_path, plot_path;
+};
+
+void run_study(const StudyOptions& options);
+
+// Eq. 4 of the paper: the standard deviation of the number of leaves each ray visits (closest hit).
+double leaf_count_variability(const Accelerator& accel, const std::vector<Ray>& rays);
+
+}  // namespace canopy
