@@ -22,6 +22,8 @@ struct alignas(64) WideNode {
 
     float& lower(int axis, int i) { return planes[axis * N + i]; }
     float& upper(int axis, int i) { return planes[(3 + axis) * N + i]; }
+    float lower(int axis, int i) const { return planes[axis * N + i]; }
+    float upper(int axis, int i) const { return planes[(3 + axis) * N + i]; }
     bool is_leaf(int i) const { return count[i] != 0; }
     bool is_empty(int i) const { return child[i] == kEmpty; }
 };

@@ -12,7 +12,8 @@
 namespace canopy {
 
 struct AcceleratorReport {
-    std::optional<double> sah, epo;  // eq. 1 and eq. 3 of the quality-metrics paper, of the binary tree
+    std::optional<double> sah, epo;            // eq. 1 and eq. 3 of the quality-metrics paper, of the binary tree
+    std::optional<double> layout_sah, layout_epo;  // the same of the traversal layout (wide trees for bvh4 and bvh8)
     std::optional<uint64_t> nodes, leaves, depth, bytes;
     std::optional<double> refs_per_tri;
 };

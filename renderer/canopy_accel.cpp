@@ -98,9 +98,14 @@ public:
 
     AcceleratorReport report() const override {
         const TreeStats stats = tree_stats(binary_, scene_.triangles.size());
-        const uint64_t bytes = std::visit([](const auto& bvh) { return bvh.bytes(); }, layout_);
-        return {sah_cost(binary_, SahCosts{}), epo_cost(binary_, scene_.triangles), stats.nodes, stats.leaves,
-                stats.depth, bytes, stats.refs_per_triangle};
+        AcceleratorReport r{sah_cost(binary_, SahCosts{}), epo_cost(binary_, scene_.triangles), {}, {}, stats.nodes,
+                            stats.leaves, stats.depth, {}, stats.refs_per_triangle};
+        std::visit([&](const auto& bvh) {
+            r.bytes = bvh.bytes();
+            r.layout_sah = sah_cost(bvh);
+            r.layout_epo = epo_cost(bvh, scene_.triangles);
+        }, layout_);
+        return r;
     }
 
 private:

@@ -18,7 +18,8 @@ namespace {
 struct Row {
     std::string builder;
     double scalar_sah = 0, scalar_epo = 0, scalar_ns = 0;       // binary tree, scalar kernel
-    double sah = 0, epo = 0, lcv = 0, simd_ns = 0;              // the widest kernel's tree
+    double sah = 0, epo = 0, lcv = 0, simd_ns = 0;              // the widest kernel's tree (binary, before collapse)
+    double wide_sah = 0, wide_epo = 0;                          // the same tree collapsed to the kernel's width
 };
 
 // Records every ray a tracer is asked for, and answers with the accelerator's hit.
@@ -234,10 +235,12 @@ void run_study(const StudyOptions& o) {
             for (Accelerator* a : {scalar.get(), simd.get()}) a->prepare(), a->build();
             const AcceleratorReport rs = scalar->report(), rw = simd->report();
             Row row{name, *rs.sah, *rs.epo, ns_per_ray(*scalar, rays, o.repeats),
-                    *rw.sah, *rw.epo, leaf_count_variability(*simd, rays), ns_per_ray(*simd, rays, o.repeats)};
+                    *rw.sah, *rw.epo, leaf_count_variability(*simd, rays), ns_per_ray(*simd, rays, o.repeats),
+                    *rw.layout_sah, *rw.layout_epo};
             std::printf("  %-8s scalar: SAH %7.2f EPO %7.2f %7.1f ns/ray | %s: SAH %7.2f EPO %7.2f LCV %6.2f %7.1f ns/ray\n",
                         name.c_str(), row.scalar_sah, row.scalar_epo, row.scalar_ns, simd->kernel().c_str(), row.sah,
                         row.epo, row.lcv, row.simd_ns);
+            std::fflush(stdout);  // a study takes minutes: show each row as it comes
             result.rows.push_back(row);
         }
         result.scalar_sah = pearson(predicted(result.rows, true, 0, 0), measured(result.rows, true));
@@ -257,7 +260,8 @@ void run_study(const StudyOptions& o) {
         for (const Row& r : s.rows)
             rows.push_back({{"builder", r.builder}, {"sah", r.sah}, {"epo", r.epo}, {"lcv", r.lcv},
                             {"scalar_ns_per_ray", r.scalar_ns}, {"simd_ns_per_ray", r.simd_ns},
-                            {"scalar_sah", r.scalar_sah}, {"scalar_epo", r.scalar_epo}});
+                            {"scalar_sah", r.scalar_sah}, {"scalar_epo", r.scalar_epo},
+                            {"wide_sah", r.wide_sah}, {"wide_epo", r.wide_epo}});
         scenes.push_back({{"scene", s.scene}, {"builders", rows},
                           {"correlation", {{"sah", json_or_null(s.simd_sah)}, {"sah_epo", json_or_null(s.simd_epo.correlation)},
                                            {"sah_epo_lcv", json_or_null(s.simd_lcv.correlation)}}},

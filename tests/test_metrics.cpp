@@ -121,3 +121,24 @@ TEST_CASE("study writes the documented JSON", "[metrics][study]") {
     CHECK(j["fixed"].contains("alpha"));
     CHECK(j["fixed"].contains("beta"));
 }
+
+TEST_CASE("metrics of wide trees", "[metrics]") {
+    // The hand-computed tree above, collapsed: one wide node over two leaves has the binary tree's SAH and EPO.
+    const std::vector<Triangle> two{{Vec3(0, 0, 0), Vec3(4, 0, 0), Vec3(0, 4, 1)},
+                                    {Vec3(1, 1, 0.5f), Vec3(2, 1, 0.5f), Vec3(1, 2, 0.5f)}};
+    Bvh small;
+    small.nodes = {{merge(BBox::of(two[0]), BBox::of(two[1])), 1, 0}, {BBox::of(two[0]), 0, 1}, {BBox::of(two[1]), 1, 1}};
+    small.refs = {0, 1};
+    const double expected_epo = 0.5 / (std::sqrt(272.0) / 2.0 + 0.5);
+    CHECK(epo_cost(collapse<2>(small, two), two) == Approx(expected_epo));
+    CHECK(epo_cost(collapse<4>(small, two), two) == Approx(expected_epo));
+    CHECK(sah_cost(collapse<8>(small, two)) == Approx(sah_cost(small)));
+
+    // Built trees: width 2 keeps every box and cost; width 8 removes inner nodes, so its SAH is lower.
+    const FlatScene flat = flatten(load_scene("gen:box?tris=3000&seed=6"));
+    const BuiltScene built = build_with("binned", flat.triangles);
+    CHECK(sah_cost(built.bvh2) == Approx(sah_cost(built.binary)).epsilon(1e-5));
+    CHECK(epo_cost(built.bvh2, flat.triangles) == Approx(epo_cost(built.binary, flat.triangles)).epsilon(1e-9));
+    CHECK(sah_cost(built.bvh8) < sah_cost(built.binary));
+    CHECK(epo_cost(built.bvh8, flat.triangles) > 0.0);
+}
