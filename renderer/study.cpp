@@ -143,10 +143,10 @@ Fit fixed_fit(const std::vector<SceneResult>& results, bool scalar, bool with_lc
 
 void print_tables(const std::vector<SceneResult>& results, const Fit& fixed_scalar, const Fit& fixed_simd) {
     std::printf("\nTable 1: per-scene correlation of predicted cost with measured ns/ray (Pearson, eq. 5)\n");
-    std::printf("%-28s %9s | %7s %14s | %7s %14s %20s\n", "scene", "builders", "scalar", "scalar", "SIMD", "SIMD", "SIMD");
-    std::printf("%-28s %9s | %7s %14s | %7s %14s %20s\n", "", "", "SAH", "SAH+EPO (a)", "SAH", "SAH+EPO (a)", "SAH+EPO+LCV (a,b)");
+    std::printf("%-34s %9s | %7s %14s | %7s %14s %20s\n", "scene", "builders", "scalar", "scalar", "SIMD", "SIMD", "SIMD");
+    std::printf("%-34s %9s | %7s %14s | %7s %14s %20s\n", "", "", "SAH", "SAH+EPO (a)", "SAH", "SAH+EPO (a)", "SAH+EPO+LCV (a,b)");
     for (const SceneResult& s : results)
-        std::printf("%-28s %9zu | %7s %7s (%.2f) | %7s %7s (%.2f) %11s (%.2f,%.2f)\n", s.scene.c_str(), s.rows.size(),
+        std::printf("%-34s %9zu | %7s %7s (%.2f) | %7s %7s (%.2f) %11s (%.2f,%.2f)\n", s.scene.c_str(), s.rows.size(),
                     corr(s.scalar_sah).c_str(), corr(s.scalar_epo.correlation).c_str(), s.scalar_epo.alpha,
                     corr(s.simd_sah).c_str(), corr(s.simd_epo.correlation).c_str(), s.simd_epo.alpha,
                     corr(s.simd_lcv.correlation).c_str(), s.simd_lcv.alpha, s.simd_lcv.beta);

@@ -31,17 +31,25 @@ TEST_CASE("EPO is zero when no node overlaps another's surfaces", "[metrics]") {
     CHECK(epo_cost(bvh, tris) == 0.0);
 }
 
+namespace {
+
+// A: plane z = y / 4 over [0,4]^2, box [0,4]x[0,4]x[0,1], area sqrt(272) / 2. B: area 0.5 at z = 0.5, inside
+// A's box. A root over a leaf each: A's leaf (C = 1 * 1 triangle) overlaps all of B; B's flat box meets A in a
+// line only, so EPO = 0.5 / (area A + area B).
+struct OverlappingPair {
+    std::vector<Triangle> tris{{Vec3(0, 0, 0), Vec3(4, 0, 0), Vec3(0, 4, 1)},
+                               {Vec3(1, 1, 0.5f), Vec3(2, 1, 0.5f), Vec3(1, 2, 0.5f)}};
+    Bvh bvh{{{merge(BBox::of(tris[0]), BBox::of(tris[1])), 1, 0}, {BBox::of(tris[0]), 0, 1}, {BBox::of(tris[1]), 1, 1}},
+            {0, 1}};
+    double epo = 0.5 / (std::sqrt(272.0) / 2.0 + 0.5);
+};
+
+}  // namespace
+
 TEST_CASE("EPO counts surfaces inside a node that its subtree does not hold", "[metrics]") {
-    // A: plane z = y / 4 over [0,4]^2, box [0,4]x[0,4]x[0,1], area sqrt(272) / 2. B: area 0.5 at z = 0.5,
-    // inside A's box. A's leaf (C = 1 * 1 triangle) overlaps all of B; B's flat box meets A in a line only.
-    const std::vector<Triangle> tris{{Vec3(0, 0, 0), Vec3(4, 0, 0), Vec3(0, 4, 1)},
-                                     {Vec3(1, 1, 0.5f), Vec3(2, 1, 0.5f), Vec3(1, 2, 0.5f)}};
-    Bvh bvh;
-    bvh.nodes = {{merge(BBox::of(tris[0]), BBox::of(tris[1])), 1, 0}, {BBox::of(tris[0]), 0, 1}, {BBox::of(tris[1]), 1, 1}};
-    bvh.refs = {0, 1};
-    const double total_area = std::sqrt(272.0) / 2.0 + 0.5;
-    CHECK(epo_cost(bvh, tris) == Approx(0.5 / total_area));
-    CHECK(epo_cost(bvh, tris, {1.2f, 3.0f}) == Approx(3.0 * 0.5 / total_area));  // scales with C_tri
+    const OverlappingPair pair;
+    CHECK(epo_cost(pair.bvh, pair.tris) == Approx(pair.epo));
+    CHECK(epo_cost(pair.bvh, pair.tris, {1.2f, 3.0f}) == Approx(3.0 * pair.epo));  // scales with C_tri
 }
 
 TEST_CASE("EPO does not count a split triangle's own pieces as overlap", "[metrics]") {
@@ -123,16 +131,11 @@ TEST_CASE("study writes the documented JSON", "[metrics][study]") {
 }
 
 TEST_CASE("metrics of wide trees", "[metrics]") {
-    // The hand-computed tree above, collapsed: one wide node over two leaves has the binary tree's SAH and EPO.
-    const std::vector<Triangle> two{{Vec3(0, 0, 0), Vec3(4, 0, 0), Vec3(0, 4, 1)},
-                                    {Vec3(1, 1, 0.5f), Vec3(2, 1, 0.5f), Vec3(1, 2, 0.5f)}};
-    Bvh small;
-    small.nodes = {{merge(BBox::of(two[0]), BBox::of(two[1])), 1, 0}, {BBox::of(two[0]), 0, 1}, {BBox::of(two[1]), 1, 1}};
-    small.refs = {0, 1};
-    const double expected_epo = 0.5 / (std::sqrt(272.0) / 2.0 + 0.5);
-    CHECK(epo_cost(collapse<2>(small, two), two) == Approx(expected_epo));
-    CHECK(epo_cost(collapse<4>(small, two), two) == Approx(expected_epo));
-    CHECK(sah_cost(collapse<8>(small, two)) == Approx(sah_cost(small)));
+    // The hand-computed pair, collapsed: one wide node over two leaves has the binary tree's SAH and EPO.
+    const OverlappingPair pair;
+    CHECK(epo_cost(collapse<2>(pair.bvh, pair.tris), pair.tris) == Approx(pair.epo));
+    CHECK(epo_cost(collapse<4>(pair.bvh, pair.tris), pair.tris) == Approx(pair.epo));
+    CHECK(sah_cost(collapse<8>(pair.bvh, pair.tris)) == Approx(sah_cost(pair.bvh)));
 
     // Built trees: width 2 keeps every box and cost; width 8 removes inner nodes, so its SAH is lower.
     const FlatScene flat = flatten(load_scene("gen:box?tris=3000&seed=6"));
