@@ -2,8 +2,10 @@
 
 #include "accel/parallel.h"
 
+#include <array>
 #include <atomic>
 #include <bit>
+#include <utility>
 
 namespace canopy {
 namespace {
@@ -22,8 +24,14 @@ uint64_t spread_bits(uint64_t x) {
 }
 
 std::vector<uint64_t> morton_codes(const std::vector<PrimRef>& refs) {
-    BBox centroids;
-    for (const PrimRef& r : refs) centroids.extend(r.center2());
+    const BBox centroids = parallel::reduce(
+        refs.size(), kGrain, BBox{},
+        [&](size_t begin, size_t end) {
+            BBox b;
+            for (size_t i = begin; i < end; ++i) b.extend(refs[i].center2());
+            return b;
+        },
+        [](BBox a, const BBox& b) { return merge(a, b); });
     const Vec3 extent = centroids.extent();
     Vec3 scale;
     for (int a = 0; a < 3; ++a) scale[a] = extent[a] > 0 ? float((1u << 21) - 1) / extent[a] : 0.0f;
@@ -35,9 +43,9 @@ std::vector<uint64_t> morton_codes(const std::vector<PrimRef>& refs) {
     return codes;
 }
 
-// Least-significant-digit radix sort of (code, index) pairs, 8 bits a pass, each pass a parallel histogram,
-// a prefix sum per chunk and a parallel stable scatter. Returns the indices in code order; stable, so equal
-// codes keep index order and the result does not depend on threads.
+// Least-significant-digit radix sort of (code, index) pairs, 11 bits a pass (six passes cover 63 bits), each
+// pass a parallel histogram, a prefix sum per chunk and a parallel stable scatter. Returns the indices in
+// code order; stable, so equal codes keep index order and the result does not depend on threads.
 std::vector<uint32_t> radix_sort(std::vector<uint64_t>& codes) {
     const size_t n = codes.size();
     const size_t chunks = std::max<size_t>(1, std::min<size_t>(64, n / kGrain));
@@ -45,18 +53,20 @@ std::vector<uint32_t> radix_sort(std::vector<uint64_t>& codes) {
     std::vector<uint64_t> next_codes(n);
     for (uint32_t i = 0; i < n; ++i) order[i] = i;
     auto chunk_begin = [&](size_t c) { return n * c / chunks; };
-    for (int shift = 0; shift < 64; shift += 8) {
-        std::vector<std::array<uint32_t, 256>> counts(chunks);
+    constexpr int kBits = 11;
+    constexpr uint64_t kDigits = uint64_t(1) << kBits;
+    for (int shift = 0; shift < 63; shift += kBits) {
+        std::vector<std::array<uint32_t, kDigits>> counts(chunks);
         parallel::for_each(chunks, 1, [&](size_t c) {
             counts[c].fill(0);
-            for (size_t i = chunk_begin(c); i < chunk_begin(c + 1); ++i) ++counts[c][(codes[i] >> shift) & 255];
+            for (size_t i = chunk_begin(c); i < chunk_begin(c + 1); ++i) ++counts[c][(codes[i] >> shift) & (kDigits - 1)];
         });
         uint32_t offset = 0;
-        for (int digit = 0; digit < 256; ++digit)
+        for (uint64_t digit = 0; digit < kDigits; ++digit)
             for (size_t c = 0; c < chunks; ++c) offset += std::exchange(counts[c][digit], offset);
         parallel::for_each(chunks, 1, [&](size_t c) {
             for (size_t i = chunk_begin(c); i < chunk_begin(c + 1); ++i) {
-                const uint32_t at = counts[c][(codes[i] >> shift) & 255]++;
+                const uint32_t at = counts[c][(codes[i] >> shift) & (kDigits - 1)]++;
                 next_codes[at] = codes[i];
                 next_order[at] = order[i];
             }
@@ -120,7 +130,7 @@ Bvh build_lbvh(BuildInput&& input, const BuildSettings&) {
     std::vector<uint64_t> codes = morton_codes(refs);
     const std::vector<uint32_t> order = radix_sort(codes);
     bvh.refs.resize(n);
-    for (uint32_t i = 0; i < n; ++i) bvh.refs[i] = refs[order[i]].prim;
+    parallel::for_each(n, kGrain, [&](size_t i) { bvh.refs[i] = refs[order[i]].prim; });
     if (n == 1) {
         bvh.nodes = {{refs[0].bounds(), 0, 1}};
         return bvh;
@@ -145,24 +155,17 @@ Bvh build_lbvh(BuildInput&& input, const BuildSettings&) {
             bounds[id] = merge(bounds[inner[id].left], bounds[inner[id].right]);
         }
     });
-    // Into canopy's layout (siblings adjacent), depth first.
-    bvh.nodes.reserve(2 * n - 1);
-    bvh.nodes.push_back({bounds[0], 0, 0});
-    std::vector<std::pair<uint32_t, uint32_t>> stack{{0, 0}};  // (karras inner id, canopy index)
-    while (!stack.empty()) {
-        const auto [id, at] = stack.back();
-        stack.pop_back();
-        const uint32_t first = uint32_t(bvh.nodes.size());
-        bvh.nodes[at].index = first;
-        for (uint32_t child : {inner[id].left, inner[id].right}) {
-            if (child >= n - 1) bvh.nodes.push_back({bounds[child], child - (n - 1), 1});
-            else bvh.nodes.push_back({bounds[child], 0, 0});
+    // Into canopy's layout: inner node i's two children go to slots 2i + 1 and 2i + 2, so siblings are adjacent
+    // and every slot is used; Morton order keeps neighbouring nodes near each other.
+    bvh.nodes.resize(2 * size_t(n) - 1);
+    bvh.nodes[0] = {bounds[0], 1, 0};
+    parallel::for_each(n - 1, kGrain, [&](size_t i) {
+        const uint32_t children[2] = {inner[i].left, inner[i].right};
+        for (uint32_t c = 0; c < 2; ++c) {
+            const uint32_t id = children[c];
+            bvh.nodes[2 * i + 1 + c] = id >= n - 1 ? BvhNode{bounds[id], id - (n - 1), 1} : BvhNode{bounds[id], 2 * id + 1, 0};
         }
-        for (uint32_t c = 2; c-- > 0;) {
-            const uint32_t child = c ? inner[id].right : inner[id].left;
-            if (child < n - 1) stack.push_back({child, first + c});
-        }
-    }
+    });
     return bvh;
 }
 
