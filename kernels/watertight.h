@@ -9,7 +9,6 @@
 #include <immintrin.h>
 
 #include <bit>
-
 #include <cmath>
 #include <utility>
 

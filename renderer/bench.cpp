@@ -159,7 +159,7 @@ void run_bench(const BenchOptions& o) {
     settings.width = o.width, settings.height = o.height, settings.max_bounces = o.bounces;
     settings.material_albedo = o.material_albedo;
     const ShadingScene shading{flat, settings};
-    const PinholeCamera camera(scene.camera ? *scene.camera : auto_camera(flat.bounds), o.width, o.height);
+    const PinholeCamera camera(scene_camera(scene, flat), o.width, o.height);
     std::vector<Image> images(entries.size(), Image(o.width, o.height));
     for (size_t i = 0; i < entries.size(); ++i) entries[i].accel->render(shading, camera, 0, images[i]);  // warm-up
     for (Image& image : images) image.clear();

@@ -32,6 +32,24 @@ void collapse_into(AnyLayout& layout, const Bvh& bvh, std::span<const Triangle> 
 }
 
 class CanopyAccelerator final : public Accelerator {
+    // Calls f.template operator()<N, Robust, TriangleTest>(layout) with the built layout and the options' modes
+    // as compile-time arguments: the one dispatch every query goes through, once per frame or per call. Widths
+    // this build did not compile never get here (kernel_width rejects them), so they answer a default value.
+    template <class F>
+    auto with_kernel(F&& f) const {
+        using Result = decltype(f.template operator()<2, true, WatertightRay>(std::get<0>(layout_)));
+        return std::visit([&](const auto& bvh) -> Result {
+            constexpr int N = std::decay_t<decltype(bvh)>::kWidth;
+            if constexpr (kernel_compiled(N)) {
+                return with_modes(options_, [&](auto robust, auto test) {
+                    return f.template operator()<N, decltype(robust)::value, typename decltype(test)::type>(bvh);
+                });
+            } else {
+                return Result{};
+            }
+        }, layout_);
+    }
+
 public:
     CanopyAccelerator(const FlatScene& scene, const CanopyOptions& options)
         : scene_(scene), options_(options), builder_(find_builder(options.builder)), width_(kernel_width(options.kernel)) {
@@ -59,41 +77,26 @@ public:
 
     uint64_t render(const ShadingScene& scene, const PinholeCamera& camera, uint32_t frame, Image& image,
                     const std::function<void(float)>& on_tile) const override {
-        return std::visit([&](const auto& bvh) -> uint64_t {
-            constexpr int N = std::decay_t<decltype(bvh)>::kWidth;
-            if constexpr (kernel_compiled(N)) {
-                return with_modes(options_, [&](auto robust, auto test) {
-                    using Tracer = CanopyTracer<N, decltype(robust)::value, typename decltype(test)::type>;
-                    return render_frame(Tracer{bvh}, scene, camera, frame, image, on_tile);
-                });
-            }
-            return 0;
-        }, layout_);
+        return with_kernel([&]<int N, bool Robust, class Test>(const WideBvh<N>& bvh) {
+            return render_frame(CanopyTracer<N, Robust, Test>{bvh}, scene, camera, frame, image, on_tile);
+        });
     }
 
     Hit trace(const Ray& ray) const override {
-        Hit hit;
-        std::visit([&](const auto& bvh) {
-            if constexpr (kernel_compiled(std::decay_t<decltype(bvh)>::kWidth)) {
-                with_modes(options_, [&](auto robust, auto test) {
-                    return closest_hit<decltype(robust)::value, typename decltype(test)::type>(bvh, ray, hit);
-                });
-            }
-        }, layout_);
-        return hit;
+        return with_kernel([&]<int N, bool Robust, class Test>(const WideBvh<N>& bvh) {
+            Hit hit;
+            closest_hit<Robust, Test>(bvh, ray, hit);
+            return hit;
+        });
     }
 
     TraversalCounts count(const Ray& ray) const override {
-        TraversalCounts counts;
-        std::visit([&](const auto& bvh) {
-            if constexpr (kernel_compiled(std::decay_t<decltype(bvh)>::kWidth)) {
-                with_modes(options_, [&](auto robust, auto test) {
-                    Hit hit;
-                    return traverse<Query::Closest, decltype(robust)::value, typename decltype(test)::type>(bvh, ray, hit, counts);
-                });
-            }
-        }, layout_);
-        return counts;
+        return with_kernel([&]<int N, bool Robust, class Test>(const WideBvh<N>& bvh) {
+            TraversalCounts counts;
+            Hit hit;
+            traverse<Query::Closest, Robust, Test>(bvh, ray, hit, counts);
+            return counts;
+        });
     }
 
     AcceleratorReport report() const override {

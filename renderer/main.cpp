@@ -49,8 +49,8 @@ void run_render(const RenderOptions& o) {
     accel->prepare();
     accel->build();
     const double build_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+    const PinholeCamera camera(scene_camera(scene, flat), o.size[0], o.size[1]);
     if (o.heatmap) {
-        const PinholeCamera camera(scene.camera ? *scene.camera : auto_camera(flat.bounds), o.size[0], o.size[1]);
         const HeatmapStats h = write_heatmap(*accel, camera, o.size[0], o.size[1], o.output);
         std::printf("%s %s: per primary ray %.1f inner nodes, %.1f leaves, %.1f triangles; PNG top colour = cost %.0f -> %s\n",
                     o.builder.c_str(), accel->kernel().c_str(), h.mean_inner, h.mean_leaves, h.mean_triangles,
@@ -62,7 +62,6 @@ void run_render(const RenderOptions& o) {
     settings.width = o.size[0], settings.height = o.size[1], settings.max_bounces = o.bounces;
     settings.material_albedo = o.material_albedo;
     const ShadingScene shading{flat, settings};
-    const PinholeCamera camera(scene.camera ? *scene.camera : auto_camera(flat.bounds), o.size[0], o.size[1]);
     Image image(o.size[0], o.size[1]);
     const bool terminal = isatty(fileno(stderr));
     uint64_t rays = 0;

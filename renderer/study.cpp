@@ -221,7 +221,7 @@ void run_study(const StudyOptions& o) {
     for (const std::string& scene_name : o.scenes) {
         const Scene scene = load_scene(scene_name);
         const FlatScene flat = flatten(scene);
-        const PinholeCamera camera(scene.camera ? *scene.camera : auto_camera(flat.bounds), o.width, o.height);
+        const PinholeCamera camera(scene_camera(scene, flat), o.width, o.height);
         auto reference = make_canopy_accelerator(flat, {"binned", "auto"});
         reference->prepare();
         reference->build();

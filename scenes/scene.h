@@ -71,6 +71,11 @@ FlatScene flatten(const Scene& scene);
 // BENCHMARK.md: target = bounds centre, eye = centre + normalize(0, 0.35, 1) * 1.1 * |diagonal|.
 Camera auto_camera(const BBox& bounds);
 
+// The scene's own camera, or the automatic one framing its flattened triangles.
+inline Camera scene_camera(const Scene& scene, const FlatScene& flat) {
+    return scene.camera ? *scene.camera : auto_camera(flat.bounds);
+}
+
 // Loads a scene from a path (.json scene file or .obj) or a generator spec "gen:NAME?tris=N&seed=S".
 // The empty name loads the embedded default scene.
 Scene load_scene(const std::string& name);

@@ -150,7 +150,7 @@ TEST_CASE("a closed room gives max_bounces + 1 rays per path and no light", "[re
 TEST_CASE("canopy and Embree render the same picture with the same ray count", "[render][embree]") {
     const Scene scene = load_scene("");
     const FlatScene flat = flatten(scene);
-    const Camera cam = scene.camera ? *scene.camera : auto_camera(flat.bounds);
+    const Camera cam = scene_camera(scene, flat);
     const auto ours = built(make_canopy_accelerator(flat, {}));
     const auto embree = built(make_embree_accelerator(flat, "medium", 0));
     const Rendered a = render_once(*ours, flat, cam, 128, 96);
