@@ -21,6 +21,8 @@ struct BuildSettings {
     // Triangles the kernel tests at once (1 scalar, 4 SIMD): the SAH charges a leaf of n triangles for
     // ceil(n / leaf_block) tests, so SIMD kernels get leaves that fill their lanes.
     uint32_t leaf_block = 1;
+    // Optimisers restructure a tree built by another builder: this one, or the optimiser's default if empty.
+    std::string start;
 
     float leaf_tests(uint32_t n) const { return float((n + leaf_block - 1) / leaf_block); }
 };
@@ -31,11 +33,16 @@ struct BuilderEntry {
     std::string name;
     std::string description;
     BuildFunction build;
+    const char* default_start = nullptr;  // set for optimisers: the builder of their start tree
 };
 
 const std::vector<BuilderEntry>& builders();
 // Throws InputError-like std::invalid_argument listing the known names when `name` is unknown.
 const BuilderEntry& find_builder(const std::string& name);
+
+// The start tree of an optimiser: built by settings.start, or by `default_start` when that is empty. The start
+// builder sees the same settings with no start of its own, so optimisers chain but never recurse.
+Bvh build_start_tree(BuildInput&& input, const BuildSettings& settings, const char* default_start);
 
 // One PrimRef per triangle, in parallel. Degenerate triangles keep their (flat) boxes;
 // triangles with non-finite vertices are rejected by the scene loaders before this point.

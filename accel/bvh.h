@@ -22,9 +22,17 @@ static_assert(sizeof(BvhNode) == 32);
 constexpr uint32_t kMaxBvhDepth = 96;
 constexpr uint32_t kMedianFallbackDepth = 64;
 
+// What a split builder reports of its splitting, for the bench's split columns (Tables 3 and 4 of the
+// split-partitioning paper, section 4.1's memory figure). Zero for builders that do not split.
+struct SplitReport {
+    double split_ms = 0;             // wall time of the split pass, inside the build time
+    uint64_t reference_capacity = 0; // PrimRef slots allocated for references, against the refs in the tree
+};
+
 struct Bvh {
     std::vector<BvhNode> nodes;  // nodes[0] is the root
     std::vector<uint32_t> refs;  // triangle ids, leaf by leaf
+    SplitReport split;
 };
 
 // Constants of eq. 1 in Aila, Karras and Laine 2013.

@@ -25,4 +25,10 @@ const BuilderEntry& find_builder(const std::string& name) {
     throw std::invalid_argument("unknown builder '" + name + "' (known: " + known + ")");
 }
 
+Bvh build_start_tree(BuildInput&& input, const BuildSettings& settings, const char* default_start) {
+    BuildSettings start_settings = settings;
+    start_settings.start.clear();
+    return find_builder(settings.start.empty() ? default_start : settings.start).build(std::move(input), start_settings);
+}
+
 }  // namespace canopy

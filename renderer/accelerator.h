@@ -16,6 +16,8 @@ struct AcceleratorReport {
     std::optional<double> layout_sah, layout_epo;  // the same of the traversal layout (wide trees for bvh4 and bvh8)
     std::optional<uint64_t> nodes, leaves, depth, bytes;
     std::optional<double> refs_per_tri;
+    std::optional<double> split_ms;           // the split pass's share of the build (split builders)
+    std::optional<double> ref_capacity_per_tri;  // PrimRef slots allocated per triangle (1.39: 39% extra)
 };
 
 class Accelerator {
@@ -41,6 +43,7 @@ public:
 
 struct CanopyOptions {
     std::string builder = "binned";
+    std::string start;  // optimisers: the builder of the start tree ("" for the optimiser's default)
     std::string kernel = "auto";  // bvh2, bvh4, bvh8, or auto: the widest this build and CPU run
     bool robust = true;      // robust traversal (Ize 2013); false is the measured fast mode
     bool watertight = true;  // watertight intersection (Woop et al. 2013); false: Möller–Trumbore, the fast mode

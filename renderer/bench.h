@@ -7,6 +7,7 @@ namespace canopy {
 struct BenchOptions {
     std::string scene;
     std::vector<std::string> builders{"binned"};
+    std::string start;  // start tree of the optimisers among the builders ("" for each one's default)
     std::vector<std::string> kernels{"auto"};
     std::vector<std::string> traversals{"robust"};      // robust, fast
     std::vector<std::string> intersectors{"watertight"};  // watertight, moller

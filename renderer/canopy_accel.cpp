@@ -54,10 +54,20 @@ public:
     CanopyAccelerator(const FlatScene& scene, const CanopyOptions& options)
         : scene_(scene), options_(options), builder_(find_builder(options.builder)), width_(kernel_width(options.kernel)) {
         if (width_ > 2) settings_.leaf_block = 4;  // the SIMD kernels test leaf triangles 4 at a time
+        if (!options.start.empty()) {
+            if (!builder_.default_start)
+                throw std::invalid_argument("--start " + options.start + ": builder '" + builder_.name +
+                                            "' is not an optimiser and takes no start tree");
+            find_builder(options.start);
+            settings_.start = options.start;
+        }
     }
 
     std::string library() const override { return "canopy"; }
-    std::string builder() const override { return builder_.name; }
+    std::string builder() const override {
+        return builder_.default_start ? builder_.name + "<" + (settings_.start.empty() ? builder_.default_start : settings_.start)
+                                      : builder_.name;
+    }
     std::string kernel() const override {
         return kernel_name(width_) + (options_.robust ? "" : " fast") + (options_.watertight ? "" : " mt");
     }
@@ -103,6 +113,10 @@ public:
         const TreeStats stats = tree_stats(binary_, scene_.triangles.size());
         AcceleratorReport r{sah_cost(binary_, SahCosts{}), epo_cost(binary_, scene_.triangles), {}, {}, stats.nodes,
                             stats.leaves, stats.depth, {}, stats.refs_per_triangle};
+        if (binary_.split.reference_capacity) {
+            r.split_ms = binary_.split.split_ms;
+            r.ref_capacity_per_tri = double(binary_.split.reference_capacity) / double(scene_.triangles.size());
+        }
         std::visit([&](const auto& bvh) {
             r.bytes = bvh.bytes();
             r.layout_sah = sah_cost(bvh);

@@ -19,7 +19,7 @@ namespace {
 using namespace canopy;
 
 struct RenderOptions {
-    std::string scene, output = "canopy.exr", builder = "binned", kernel = "auto", accel = "canopy";
+    std::string scene, output = "canopy.exr", builder = "binned", start, kernel = "auto", accel = "canopy";
     std::string embree_quality = "medium";
     int spp = 1, threads = 0, bounces = 8;
     std::vector<int> size{1024, 768};
@@ -44,7 +44,7 @@ void run_render(const RenderOptions& o) {
     const FlatScene flat = flatten(scene);
     std::unique_ptr<Accelerator> accel =
         o.accel == "embree" ? make_embree_accelerator(flat, o.embree_quality, o.threads)
-                            : make_canopy_accelerator(flat, {o.builder, o.kernel, o.traversal == "robust", o.intersector == "watertight"});
+                            : make_canopy_accelerator(flat, {o.builder, o.start, o.kernel, o.traversal == "robust", o.intersector == "watertight"});
     const auto start = std::chrono::steady_clock::now();
     accel->prepare();
     accel->build();
@@ -76,7 +76,7 @@ void run_render(const RenderOptions& o) {
     write_exr(o.output, o.size[0], o.size[1], image.average(o.spp));
     std::printf("%s: %zu triangles, %s build %.1f ms, %d spp in %.2f s (%.2f Mrays/s), mean %.5f -> %s\n",
                 o.scene.empty() ? "default scene" : o.scene.c_str(), flat.triangles.size(),
-                o.accel == "embree" ? ("embree " + o.embree_quality).c_str() : o.builder.c_str(), build_ms, o.spp,
+                o.accel == "embree" ? ("embree " + o.embree_quality).c_str() : accel->builder().c_str(), build_ms, o.spp,
                 render_s, double(rays) / render_s / 1e6, image.mean(o.spp), o.output.c_str());
 }
 
@@ -94,6 +94,7 @@ int main(int argc, char** argv) {
     render->add_option("--spp", r.spp, "Samples (frames) per pixel")->check(CLI::Range(1, 1 << 20))->capture_default_str();
     render->add_option("--size", r.size, "Width and height")->expected(2)->check(CLI::Range(1, 16384))->capture_default_str();
     render->add_option("--builder", r.builder, "BVH builder: " + builder_names())->capture_default_str();
+    render->add_option("--start", r.start, "Optimisers: builder of the start tree (default: the optimiser's own)");
     render->add_option("--kernel", r.kernel, "Traversal kernel: auto (widest), bvh2, bvh4, bvh8")->capture_default_str();
     render->add_option("--accel", r.accel, "canopy or embree")->check(CLI::IsMember({"canopy", "embree"}))->capture_default_str();
     render->add_option("--embree-quality", r.embree_quality, "low, medium or high")->capture_default_str();
@@ -113,6 +114,7 @@ int main(int argc, char** argv) {
     CLI::App* bench = app.add_subcommand("bench", "Benchmark builders and kernels against Embree (BENCHMARK.md)");
     bench->add_option("scene", b.scene, "Scene: scene.json, .obj or gen:NAME?tris=N&seed=S")->required();
     bench->add_option("--builder", b.builders, "Builders: " + builder_names())->delimiter(',')->capture_default_str();
+    bench->add_option("--start", b.start, "Optimisers among the builders: builder of their start tree");
     bench->add_option("--kernel", b.kernels, "Kernels: auto (widest), bvh2, bvh4, bvh8")->delimiter(',')->capture_default_str();
     bench->add_option("--accel", accels, "Reference accelerators in the same run: embree")->delimiter(',')
         ->check(CLI::IsMember({"embree"}));

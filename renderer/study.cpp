@@ -222,7 +222,7 @@ void run_study(const StudyOptions& o) {
         const Scene scene = load_scene(scene_name);
         const FlatScene flat = flatten(scene);
         const PinholeCamera camera(scene_camera(scene, flat), o.width, o.height);
-        auto reference = make_canopy_accelerator(flat, {"binned", "auto"});
+        auto reference = make_canopy_accelerator(flat, {"binned", "", "auto"});
         reference->prepare();
         reference->build();
         const std::vector<Ray> rays = diffuse_rays(*reference, flat, camera, o.width, o.height);
@@ -230,8 +230,8 @@ void run_study(const StudyOptions& o) {
                     rays.size(), o.width, o.height, FrameSettings{}.max_bounces);
         SceneResult result{scene.name.empty() ? scene_name : scene.name, {}, {}, {}, {}, {}, {}};
         for (const std::string& name : names) {
-            auto scalar = make_canopy_accelerator(flat, {name, "bvh2"});
-            auto simd = make_canopy_accelerator(flat, {name, "auto"});
+            auto scalar = make_canopy_accelerator(flat, {name, "", "bvh2"});
+            auto simd = make_canopy_accelerator(flat, {name, "", "auto"});
             for (Accelerator* a : {scalar.get(), simd.get()}) a->prepare(), a->build();
             const AcceleratorReport rs = scalar->report(), rw = simd->report();
             Row row{name, *rs.sah, *rs.epo, ns_per_ray(*scalar, rays, o.repeats),

@@ -97,7 +97,7 @@ TEST_CASE("LCV is the standard deviation of leaves visited per ray", "[metrics]"
     flat.triangles = {{Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0)}, {Vec3(10, 0, 0), Vec3(11, 0, 0), Vec3(10, 1, 0)}};
     const std::vector<Ray> rays{{{0.2f, 0.2f, 1.0f}, {0, 0, -1}}, {{-1.0f, 0.2f, 0.0f}, {1, 0, 0}}, {{0, 0, 5}, {0, 0, 1}}};
     for (const char* kernel : {"bvh2", "auto"}) {
-        auto accel = make_canopy_accelerator(flat, {"binned", kernel});
+        auto accel = make_canopy_accelerator(flat, {"binned", "", kernel});
         accel->prepare();
         accel->build();
         const uint64_t leaves = *accel->report().leaves;
