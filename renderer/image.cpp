@@ -1,5 +1,7 @@
 #include "renderer/image.h"
 
+#include <OpenImageIO/imagebuf.h>
+#include <OpenImageIO/imagebufalgo.h>
 #include <OpenImageIO/imageio.h>
 
 #include <stdexcept>
@@ -26,6 +28,25 @@ void write_exr(const std::string& path, int width, int height, const std::vector
     spec.attribute("compression", "zip");
     if (!out->open(path, spec) || !out->write_image(OIIO::TypeDesc::FLOAT, rgb.data()) || !out->close())
         throw std::runtime_error(path + ": cannot write EXR: " + out->geterror());
+}
+
+std::vector<float> read_exr(const std::string& path, int width, int height) {
+    auto in = OIIO::ImageInput::open(path);
+    if (!in) throw std::runtime_error(path + ": cannot read image: " + OIIO::geterror());
+    const OIIO::ImageSpec& spec = in->spec();
+    if (spec.width != width || spec.height != height || spec.nchannels != 3)
+        throw std::runtime_error(path + ": expected " + std::to_string(width) + "x" + std::to_string(height) +
+                                 " RGB, found " + std::to_string(spec.width) + "x" + std::to_string(spec.height) + "x" +
+                                 std::to_string(spec.nchannels));
+    std::vector<float> rgb(size_t(width) * size_t(height) * 3);
+    if (!in->read_image(0, 0, 0, 3, OIIO::TypeDesc::FLOAT, rgb.data())) throw std::runtime_error(path + ": " + in->geterror());
+    return rgb;
+}
+
+double rms_error(const std::vector<float>& a, const std::vector<float>& b, int width, int height) {
+    const OIIO::ImageSpec spec(width, height, 3, OIIO::TypeDesc::FLOAT);
+    const OIIO::ImageBuf image_a(spec, const_cast<float*>(a.data())), image_b(spec, const_cast<float*>(b.data()));
+    return OIIO::ImageBufAlgo::compare(image_a, image_b, 0.0f, 0.0f).rms_error;
 }
 
 }  // namespace canopy

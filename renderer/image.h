@@ -30,4 +30,11 @@ private:
 // Writes a float RGB EXR through OpenImageIO; throws std::runtime_error naming the path on failure.
 void write_exr(const std::string& path, int width, int height, const std::vector<float>& rgb);
 
+// Reads an RGB EXR written by write_exr; throws std::runtime_error naming the path when it cannot be read or
+// is not width x height x 3.
+std::vector<float> read_exr(const std::string& path, int width, int height);
+
+// Root-mean-square error over all pixels and channels, by OpenImageIO's image comparison.
+double rms_error(const std::vector<float>& a, const std::vector<float>& b, int width, int height);
+
 }  // namespace canopy

@@ -2,6 +2,8 @@
 #include "accel/builder.h"
 #include "renderer/accelerator.h"
 #include "renderer/bench.h"
+#include "renderer/accuracy.h"
+#include "renderer/tradeoff.h"
 #include "renderer/heatmap.h"
 #include "renderer/study.h"
 
@@ -144,6 +146,35 @@ int main(int argc, char** argv) {
     study->add_option("--json", st.json_path, "Write results as JSON");
     study->add_option("--plot", st.plot_path, "Write a PNG: predicted (eq. 7) against measured SIMD ns/ray, a panel per scene");
 
+    TradeoffOptions tr;
+    std::vector<std::string> tradeoff_accels;
+    std::vector<int> tradeoff_size{tr.width, tr.height};
+    CLI::App* tradeoff = app.add_subcommand("tradeoff", "Time to image against RMSE per builder, against a converged reference");
+    tradeoff->add_option("scene", tr.scene, "Scene: scene.json, .obj or gen:NAME?tris=N&seed=S")->required();
+    tradeoff->add_option("--builder", tr.builders, "Builders: " + builder_names())->delimiter(',')->capture_default_str();
+    tradeoff->add_option("--kernel", tr.kernel, "Kernel: auto (widest), bvh2, bvh4, bvh8")->capture_default_str();
+    tradeoff->add_option("--accel", tradeoff_accels, "Also Embree, at the --embree-quality levels")->delimiter(',')
+        ->check(CLI::IsMember({"embree"}));
+    tradeoff->add_option("--embree-quality", tr.embree_qualities, "Embree qualities: low, medium, high")->delimiter(',')
+        ->check(CLI::IsMember({"low", "medium", "high"}));
+    tradeoff->add_option("--seconds", tr.seconds, "Wall time per builder, build included")->check(CLI::Range(0.001, 1e6))->capture_default_str();
+    tradeoff->add_option("--max-frames", tr.max_frames, "Frames per builder at most")->check(CLI::Range(1, 1 << 20))->capture_default_str();
+    tradeoff->add_option("--reference-spp", tr.reference_spp, "Samples of the cached reference")->check(CLI::Range(1, 1 << 20))->capture_default_str();
+    tradeoff->add_option("--size", tradeoff_size, "Width and height")->expected(2)->check(CLI::Range(1, 16384))->capture_default_str();
+    tradeoff->add_option("--bounces", tr.bounces, "Maximum bounces")->check(CLI::Range(0, 1024))->capture_default_str();
+    tradeoff->add_flag("--materials", tr.material_albedo, "Use the .mtl Kd colours as albedo");
+    tradeoff->add_option("-o,--output", tr.output, "Output stem: STEM.json, STEM.csv, STEM.png, cached reference beside")->capture_default_str();
+    tradeoff->add_option("--threads", threads, "Threads for every library (0: all)")->check(CLI::Range(0, 4096));
+
+    AccuracyOptions ac;
+    CLI::App* accuracy = app.add_subcommand("accuracy", "Leaks and hit-distance error of every intersector and traversal mode, scaled and moved");
+    accuracy->add_option("--builder", ac.builder, "BVH builder: " + builder_names())->capture_default_str();
+    accuracy->add_option("--kernel", ac.kernel, "Kernel: auto (widest), bvh2, bvh4, bvh8")->capture_default_str();
+    accuracy->add_option("--rays", ac.rays, "Rays per case and mode")->check(CLI::Range(1, 100000000))->capture_default_str();
+    accuracy->add_option("--json", ac.json_path, "Write the rows as JSON");
+    accuracy->add_option("--plot", ac.plot_path, "Write a PNG: distance error against coordinate magnitude");
+    accuracy->add_option("--threads", threads, "Threads (0: all)")->check(CLI::Range(0, 4096));
+
     CLI11_PARSE(app, argc, argv);
     std::optional<tbb::global_control> limit;
     if (threads > 0) limit.emplace(tbb::global_control::max_allowed_parallelism, size_t(threads));
@@ -151,6 +182,13 @@ int main(int argc, char** argv) {
         if (*render) {
             r.threads = threads;
             run_render(r);
+        } else if (*accuracy) {
+            run_accuracy(ac);
+        } else if (*tradeoff) {
+            tr.width = tradeoff_size[0], tr.height = tradeoff_size[1];
+            if (tradeoff_accels.empty()) tr.embree_qualities.clear();
+            else if (tr.embree_qualities.empty()) tr.embree_qualities = {"medium"};
+            run_tradeoff(tr);
         } else if (*study) {
             for (const std::string& b : st.builders) find_builder(b);  // unknown names fail before any work
             st.width = study_size[0], st.height = study_size[1];

@@ -189,6 +189,15 @@ TEST_CASE("EXR output holds the rendered values", "[render]") {
     REQUIRE(in->read_image(0, 0, 0, 3, OIIO::TypeDesc::FLOAT, back.data()));
     CHECK(back == rgb);
     CHECK_THROWS_WITH(write_exr("/nonexistent-dir/x.exr", 8, 4, rgb), Catch::Contains("/nonexistent-dir/x.exr"));
+    CHECK(read_exr(path, 8, 4) == rgb);  // the tradeoff command's cached reference
+    CHECK_THROWS_WITH(read_exr(path, 4, 8), Catch::Contains("expected 4x8"));
+}
+
+TEST_CASE("RMSE against a reference is the root of the mean squared difference", "[render]") {
+    std::vector<float> a(4 * 2 * 3, 0.5f), b = a;
+    b[0] = 1.5f;  // one channel of one pixel off by 1: mean square 1/24
+    CHECK(rms_error(a, b, 4, 2) == Approx(std::sqrt(1.0 / 24.0)));
+    CHECK(rms_error(a, a, 4, 2) == 0.0);
 }
 
 TEST_CASE("bench writes the documented JSON", "[bench][embree]") {
