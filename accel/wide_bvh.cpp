@@ -6,19 +6,15 @@
 namespace canopy {
 namespace {
 
-// A leaf of the wide tree: its first entry in WideBvh::leaves, and the binary leaf's refs it is made of.
-struct LeafRun {
-    uint32_t first_entry, first_ref, count;
-};
-
 template <int N>
 class Collapser {
 public:
-    Collapser(const Bvh& bvh, WideBvh<N>& out) : bvh_(bvh), out_(out) {}
+    Collapser(const Bvh& bvh, WideNodes<N>& nodes, uint32_t (*entries)(int, uint32_t))
+        : bvh_(bvh), nodes_(nodes), entries_(entries) {}
 
     // Writes every node; returns the leaves in emission order, for filling WideBvh::leaves in parallel.
     std::vector<LeafRun> run() {
-        out_.nodes.resize(1);
+        nodes_.resize(1);
         if (bvh_.nodes[0].is_leaf()) {
             const uint32_t lone[1] = {0};
             emit(0, std::span<const uint32_t>(lone, 1));
@@ -56,40 +52,41 @@ private:
     // turn, so siblings sit next to each other in memory as the traversal visits them.
     void emit(uint32_t self, std::span<const uint32_t> children) {
         for (int i = 0; i < N; ++i) set_empty(self, i);
-        uint32_t next = uint32_t(out_.nodes.size());
+        uint32_t next = uint32_t(nodes_.size());
         for (size_t i = 0; i < children.size(); ++i) {
             const BvhNode& c = bvh_.nodes[children[i]];
             set_box(self, int(i), c.bounds);
             if (c.is_leaf()) {
-                out_.nodes[self].child[i] = leaf_entries_;
-                out_.nodes[self].count[i] = c.count;
+                nodes_[self].child[i] = leaf_entries_;
+                nodes_[self].count[i] = c.count;
                 leaf_runs_.push_back({leaf_entries_, c.index, c.count});
-                leaf_entries_ += canopy::leaf_entries(N, c.count);
+                leaf_entries_ += entries_(N, c.count);
             } else {
-                out_.nodes[self].child[i] = next++;
-                out_.nodes[self].count[i] = 0;
+                nodes_[self].child[i] = next++;
+                nodes_[self].count[i] = 0;
             }
         }
-        out_.nodes.resize(next);
+        nodes_.resize(next);
         for (size_t i = 0; i < children.size(); ++i)
-            if (!bvh_.nodes[children[i]].is_leaf()) emit_children_of(children[i], out_.nodes[self].child[i]);
+            if (!bvh_.nodes[children[i]].is_leaf()) emit_children_of(children[i], nodes_[self].child[i]);
     }
 
     void set_box(uint32_t node, int i, const BBox& box) {
         for (int a = 0; a < 3; ++a) {
-            out_.nodes[node].lower(a, i) = box.lower[a];
-            out_.nodes[node].upper(a, i) = box.upper[a];
+            nodes_[node].lower(a, i) = box.lower[a];
+            nodes_[node].upper(a, i) = box.upper[a];
         }
     }
 
     void set_empty(uint32_t node, int i) {
         set_box(node, i, BBox{});  // lower = +inf, upper = -inf
-        out_.nodes[node].child[i] = WideNode<N>::kEmpty;
-        out_.nodes[node].count[i] = 0;
+        nodes_[node].child[i] = WideNode<N>::kEmpty;
+        nodes_[node].count[i] = 0;
     }
 
     const Bvh& bvh_;
-    WideBvh<N>& out_;
+    WideNodes<N>& nodes_;
+    uint32_t (*entries_)(int, uint32_t);
     std::vector<LeafRun> leaf_runs_;
     uint32_t leaf_entries_ = 0;
 };
@@ -122,20 +119,33 @@ void fill_leaf(TriangleBlock4* out, const Bvh& bvh, std::span<const Triangle> tr
 }  // namespace
 
 template <int N>
+std::vector<LeafRun> collapse_nodes(const Bvh& bvh, WideNodes<N>& nodes, uint32_t (*entries)(int, uint32_t),
+                                    uint32_t& total_entries) {
+    nodes.clear();
+    nodes.reserve(bvh.nodes.size() / 2 + 1);
+    Collapser<N> collapser(bvh, nodes, entries);
+    std::vector<LeafRun> runs = collapser.run();
+    total_entries = collapser.leaf_entries();
+    return runs;
+}
+
+template <int N>
 WideBvh<N> collapse(const Bvh& bvh, std::span<const Triangle> triangles) {
     WideBvh<N> out;
     if (bvh.nodes.empty()) return out;
     out.bounds = bvh.nodes[0].bounds;
-    out.nodes.reserve(bvh.nodes.size() / 2 + 1);
-    Collapser<N> collapser(bvh, out);
-    const std::vector<LeafRun> runs = collapser.run();
-    out.leaves.resize(collapser.leaf_entries());
+    uint32_t entries = 0;
+    const std::vector<LeafRun> runs = collapse_nodes<N>(bvh, out.nodes, &leaf_entries, entries);
+    out.leaves.resize(entries);
     parallel::for_each(runs.size(), 4 * 1024, [&](size_t i) {
         fill_leaf(&out.leaves[runs[i].first_entry], bvh, triangles, runs[i].first_ref, runs[i].count);
     });
     return out;
 }
 
+template std::vector<LeafRun> collapse_nodes<2>(const Bvh&, WideNodes<2>&, uint32_t (*)(int, uint32_t), uint32_t&);
+template std::vector<LeafRun> collapse_nodes<4>(const Bvh&, WideNodes<4>&, uint32_t (*)(int, uint32_t), uint32_t&);
+template std::vector<LeafRun> collapse_nodes<8>(const Bvh&, WideNodes<8>&, uint32_t (*)(int, uint32_t), uint32_t&);
 template WideBvh<2> collapse<2>(const Bvh&, std::span<const Triangle>);
 template WideBvh<4> collapse<4>(const Bvh&, std::span<const Triangle>);
 template WideBvh<8> collapse<8>(const Bvh&, std::span<const Triangle>);

@@ -54,10 +54,13 @@ using LeafOf = std::conditional_t<(N > 2), TriangleBlock4, LeafTriangle>;
 inline uint32_t leaf_entries(int width, uint32_t triangles) { return width > 2 ? (triangles + 3) / 4 : triangles; }
 
 template <int N>
+using WideNodes = std::vector<WideNode<N>, HugePageAllocator<WideNode<N>>>;
+
+template <int N>
 struct WideBvh {
     static constexpr int kWidth = N;
     using Leaf = LeafOf<N>;
-    std::vector<WideNode<N>, HugePageAllocator<WideNode<N>>> nodes;  // nodes[0] is the root, never a leaf
+    WideNodes<N> nodes;  // nodes[0] is the root, never a leaf
     std::vector<Leaf, HugePageAllocator<Leaf>> leaves;
     BBox bounds;
 
@@ -69,5 +72,17 @@ struct WideBvh {
 // children until there are N. A root that is a leaf becomes a node with one leaf child.
 template <int N>
 WideBvh<N> collapse(const Bvh& bvh, std::span<const Triangle> triangles);
+
+// A leaf of a wide tree: its first entry in the tree's leaf array, and the binary leaf's refs it is made of.
+struct LeafRun {
+    uint32_t first_entry, first_ref, count;
+};
+
+// The node half of collapse, for trees whose leaves hold something else than triangles (the two-level top
+// level): writes `nodes`; a binary leaf of n refs takes entries(N, n) leaf entries, `total_entries` in all.
+// Returns the leaves in emission order, for the caller to fill.
+template <int N>
+std::vector<LeafRun> collapse_nodes(const Bvh& bvh, WideNodes<N>& nodes, uint32_t (*entries)(int, uint32_t),
+                                    uint32_t& total_entries);
 
 }  // namespace canopy

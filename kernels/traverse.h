@@ -103,11 +103,11 @@ struct StackEntry {
 };
 
 // Prefetches every cache line of a node (one for BVH2, two for BVH4, four for BVH8), or a leaf's first lines.
-template <int N>
-inline void prefetch(const WideBvh<N>& bvh, const StackEntry& e) {
-    const char* p = e.count == 0 ? reinterpret_cast<const char*>(&bvh.nodes[e.child])
-                                 : reinterpret_cast<const char*>(&bvh.leaves[e.child]);
-    for (size_t line = 0; line < sizeof(WideNode<N>); line += 64) _mm_prefetch(p + line, _MM_HINT_T0);
+template <class Tree>
+inline void prefetch(const Tree& tree, const StackEntry& e) {
+    const char* p = e.count == 0 ? reinterpret_cast<const char*>(&tree.nodes[e.child])
+                                 : reinterpret_cast<const char*>(&tree.leaves[e.child]);
+    for (size_t line = 0; line < sizeof(tree.nodes[0]); line += 64) _mm_prefetch(p + line, _MM_HINT_T0);
 }
 
 // Intersects a leaf's triangles; true when a hit was recorded.
@@ -129,6 +129,59 @@ inline bool intersect_leaf(const WideBvh<N>& bvh, const StackEntry& leaf, const 
     return found;
 }
 
+// The traversal loop of every kernel: from `start` (the root, or any node or leaf of a tree, as the two-level
+// kernels enter object trees), children near to far, leaves handed to `leaf(entry)`, which returns true when it
+// recorded a hit. `hit.t` is the running far limit. Tree is anything with `nodes` (WideNode<N>) and `leaves`.
+// Returns true when an any-hit query may stop.
+template <Query Q, bool Robust, int N, class Tree, class Counter, class LeafFn>
+bool traverse_from(const Tree& tree, StackEntry start, const SlabRay<N>& box_ray, float tmin, Hit& hit,
+                   Counter& counter, LeafFn&& leaf) {
+    std::array<StackEntry, kMaxBvhDepth * (N - 1) + 1> stack;
+    int sp = 0;
+    StackEntry current = start;
+    for (;;) {
+        if (current.count == 0) {
+            counter.inner();
+            const WideNode<N>& node = tree.nodes[current.child];
+            std::array<float, N> tnear;
+            uint32_t mask = intersect_children<Robust, N>(node, box_ray, tmin, hit.t, tnear);
+            if (mask && (mask & (mask - 1)) == 0) {  // one child hit: go there directly
+                const int only = std::countr_zero(mask);
+                current = {node.child[only], node.count[only], tnear[only]};
+                continue;
+            }
+            if (mask && std::popcount(mask) == 2) {  // two: go to the nearer, keep the farther
+                const int a = std::countr_zero(mask), b = std::countr_zero(mask & (mask - 1));
+                const int near = tnear[b] < tnear[a] ? b : a, far = near == a ? b : a;
+                stack[sp++] = {node.child[far], node.count[far], tnear[far]};
+                prefetch(tree, stack[sp - 1]);  // its fetch overlaps the near subtree's work
+                current = {node.child[near], node.count[near], tnear[near]};
+                continue;
+            }
+            if (mask) {
+                // Push all hit children far to near by insertion into the stack top, then take the nearest.
+                const int base = sp;
+                for (; mask; mask &= mask - 1) {
+                    const int i = std::countr_zero(mask);
+                    const StackEntry e{node.child[i], node.count[i], tnear[i]};
+                    prefetch(tree, e);
+                    int j = sp++;
+                    for (; j > base && stack[j - 1].tnear < e.tnear; --j) stack[j] = stack[j - 1];
+                    stack[j] = e;
+                }
+                current = stack[--sp];
+                continue;
+            }
+        } else if (leaf(current) && Q == Query::Any) {
+            return true;
+        }
+        do {
+            if (sp == 0) return false;
+            current = stack[--sp];
+        } while (current.tnear > hit.t);
+    }
+}
+
 }  // namespace detail
 
 // Closest hit (Query::Closest) or any hit (Query::Any) in (ray.tmin, ray.tmax]. For Any, `hit` holds the
@@ -140,50 +193,11 @@ bool traverse(const WideBvh<N>& bvh, const Ray& ray, Hit& hit, Counter&& counter
     if (bvh.nodes.empty()) return false;
     const detail::SlabRay<N> box_ray(ray);
     const TriangleTest tri_ray(ray);
-    std::array<detail::StackEntry, kMaxBvhDepth * (N - 1) + 1> stack;
-    int sp = 0;
-    detail::StackEntry current{0, 0, ray.tmin};
-    for (;;) {
-        if (current.count == 0) {
-            counter.inner();
-            const WideNode<N>& node = bvh.nodes[current.child];
-            std::array<float, N> tnear;
-            uint32_t mask = detail::intersect_children<Robust, N>(node, box_ray, ray.tmin, hit.t, tnear);
-            if (mask && (mask & (mask - 1)) == 0) {  // one child hit: go there directly
-                const int only = std::countr_zero(mask);
-                current = {node.child[only], node.count[only], tnear[only]};
-                continue;
-            }
-            if (mask && std::popcount(mask) == 2) {  // two: go to the nearer, keep the farther
-                const int a = std::countr_zero(mask), b = std::countr_zero(mask & (mask - 1));
-                const int near = tnear[b] < tnear[a] ? b : a, far = near == a ? b : a;
-                stack[sp++] = {node.child[far], node.count[far], tnear[far]};
-                detail::prefetch(bvh, stack[sp - 1]);  // its fetch overlaps the near subtree's work
-                current = {node.child[near], node.count[near], tnear[near]};
-                continue;
-            }
-            if (mask) {
-                // Push all hit children far to near by insertion into the stack top, then take the nearest.
-                const int base = sp;
-                for (; mask; mask &= mask - 1) {
-                    const int i = std::countr_zero(mask);
-                    const detail::StackEntry e{node.child[i], node.count[i], tnear[i]};
-                    detail::prefetch(bvh, e);
-                    int j = sp++;
-                    for (; j > base && stack[j - 1].tnear < e.tnear; --j) stack[j] = stack[j - 1];
-                    stack[j] = e;
-                }
-                current = stack[--sp];
-                continue;
-            }
-        } else if (detail::intersect_leaf(bvh, current, tri_ray, ray.tmin, hit, counter) && Q == Query::Any) {
-            return true;
-        }
-        do {
-            if (sp == 0) return hit.found();
-            current = stack[--sp];
-        } while (current.tnear > hit.t);
-    }
+    detail::traverse_from<Q, Robust>(bvh, {0, 0, ray.tmin}, box_ray, ray.tmin, hit, counter,
+                                     [&](const detail::StackEntry& leaf) {
+                                         return detail::intersect_leaf(bvh, leaf, tri_ray, ray.tmin, hit, counter);
+                                     });
+    return hit.found();
 }
 
 template <bool Robust = true, class TriangleTest = WatertightRay, int N>
