@@ -2,6 +2,7 @@
 // An accelerator as the renderer and the benchmark see it: built from a flat scene, then asked to
 // render frames. The virtual call is per frame; inside, each implementation runs the path tracer
 // template over its own tracer type, so no per-ray dispatch is paid.
+#include "accel/two_level.h"
 #include "kernels/traverse.h"
 #include "renderer/path_tracer.h"
 
@@ -18,6 +19,8 @@ struct AcceleratorReport {
     std::optional<double> refs_per_tri;
     std::optional<double> split_ms;           // the split pass's share of the build (split builders)
     std::optional<double> ref_capacity_per_tri;  // PrimRef slots allocated per triangle (1.39: 39% extra)
+    std::optional<double> objects_ms, top_level_ms;  // two-level builds: the object trees, the top level alone
+    std::optional<uint64_t> brefs;                   // two-level builds: top-level leaf references
 };
 
 class Accelerator {
@@ -47,10 +50,19 @@ struct CanopyOptions {
     std::string kernel = "auto";  // bvh2, bvh4, bvh8, or auto: the widest this build and CPU run
     bool robust = true;      // robust traversal (Ize 2013); false is the measured fast mode
     bool watertight = true;  // watertight intersection (Woop et al. 2013); false: Möller–Trumbore, the fast mode
+    // flat: one BVH over world triangles; two-level: object BVHs (built by `builder`) under a top level over
+    // instances; rebraid: that top level opening object BVHs where they overlap (Benthin et al. 2017).
+    std::string toplevel = "flat";
 };
 
-// Throws std::invalid_argument for an unknown builder or kernel.
+// Throws std::invalid_argument for an unknown builder or kernel, or a two-level top level (it needs the scene).
 std::unique_ptr<Accelerator> make_canopy_accelerator(const FlatScene& scene, const CanopyOptions& options);
+// Any top level: `flat` must be flatten(scene).
+std::unique_ptr<Accelerator> make_canopy_accelerator(const Scene& scene, const FlatScene& flat, const CanopyOptions& options);
+
+// Objects (OBJ groups) in object space, and a two-level instance per (scene instance, object), with triangle ids
+// numbered as flatten() numbers them, so hits index the flat scene's triangles.
+TwoLevelInput two_level_input(const Scene& scene);
 
 // quality: "low", "medium" or "high". threads: 0 for all. Throws std::invalid_argument for another quality.
 std::unique_ptr<Accelerator> make_embree_accelerator(const FlatScene& scene, const std::string& quality, int threads);

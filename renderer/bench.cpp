@@ -50,15 +50,16 @@ std::string optimiser_start(const std::string& builder, const std::string& start
     return find_builder(builder).default_start ? start : "";
 }
 
-std::vector<Entry> make_entries(const FlatScene& flat, const BenchOptions& o) {
+std::vector<Entry> make_entries(const Scene& scene, const FlatScene& flat, const BenchOptions& o) {
     std::vector<Entry> entries;
-    for (const std::string& builder : o.builders)
-        for (const std::string& kernel : o.kernels)
-            for (const std::string& traversal : o.traversals)
-                for (const std::string& intersector : o.intersectors)
-                    entries.push_back({make_canopy_accelerator(
-                        flat, {builder, optimiser_start(builder, o.start), kernel, traversal == "robust",
-                               intersector == "watertight"})});
+    for (const std::string& toplevel : o.toplevels)
+        for (const std::string& builder : o.builders)
+            for (const std::string& kernel : o.kernels)
+                for (const std::string& traversal : o.traversals)
+                    for (const std::string& intersector : o.intersectors)
+                        entries.push_back({make_canopy_accelerator(
+                            scene, flat, {builder, optimiser_start(builder, o.start), kernel, traversal == "robust",
+                                          intersector == "watertight", toplevel})});
     for (const std::string& quality : o.embree_qualities)
         entries.push_back({make_embree_accelerator(flat, quality, o.threads)});
     return entries;
@@ -79,8 +80,8 @@ nlohmann::json or_null(const std::optional<T>& v) {
 
 void print_table(const std::vector<Entry>& entries, uint64_t tris) {
     const Entry* ref = reference_of(entries);
-    std::printf("\n%-22s %10s %8s %10s %8s %11s %8s %7s %9s %9s %7s %8s %8s %7s %8s %10s",
-                "accelerator", "build ms", "Mprim/s", "frame ms", "Mrays/s", "rays/frame", "SAH", "EPO", "nodes",
+    std::printf("\n%-22s %10s %8s %10s %8s %11s %8s %7s %7s %9s %9s %7s %8s %8s %7s %8s %10s",
+                "accelerator", "build ms", "Mprim/s", "frame ms", "Mrays/s", "rays/frame", "SAH", "EPO", "wSAH", "nodes",
                 "leaves", "split%", "split ms", "%build", "alloc%", "MB", "img mean");
     if (ref) std::printf(" %9s %9s", "build/emb", "frame/emb");
     std::printf("\n");
@@ -89,8 +90,10 @@ void print_table(const std::vector<Entry>& entries, uint64_t tris) {
         const double frame = e.frame_mean();
         std::printf("%-22s %10.2f %8.2f %10.2f %8.2f %11.0f ", e.label().c_str(), e.build_min(),
                     double(tris) / e.build_min() / 1e3, frame, e.rays_per_frame() / frame / 1e3, e.rays_per_frame());
-        if (r.sah) std::printf("%8.2f %7.2f ", *r.sah, *r.epo);
+        if (r.sah && r.epo) std::printf("%8.2f %7.2f ", *r.sah, *r.epo);
         else std::printf("%8s %7s ", "-", "-");
+        if (r.layout_sah) std::printf("%7.2f ", *r.layout_sah);  // eq. 1 of the traversal layout, wide nodes
+        else std::printf("%7s ", "-");
         if (r.nodes) std::printf("%9llu %9llu %7.1f ", (unsigned long long)*r.nodes, (unsigned long long)*r.leaves,
                                  100.0 * (*r.refs_per_tri - 1.0));
         else std::printf("%9s %9s %7s ", "-", "-", "-");
@@ -158,7 +161,7 @@ void run_bench(const BenchOptions& o) {
                 o.width, o.height, o.bounces, o.builds, o.frames,
                 o.threads ? std::to_string(o.threads).c_str() : "all");
 
-    std::vector<Entry> entries = make_entries(flat, o);
+    std::vector<Entry> entries = make_entries(scene, flat, o);
     for (int round = 0; round < o.builds; ++round) {
         for (Entry& e : entries) {
             e.accel->prepare();

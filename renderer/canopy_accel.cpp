@@ -2,6 +2,7 @@
 #include "accel/metrics.h"
 #include "kernels/dispatch.h"
 #include "kernels/traverse.h"
+#include "kernels/traverse_two_level.h"
 #include "renderer/accelerator.h"
 
 #include <variant>
@@ -9,9 +10,9 @@
 namespace canopy {
 namespace {
 
-template <int N, bool Robust, class TriangleTest>
+template <class Layout, bool Robust, class TriangleTest>
 struct CanopyTracer {
-    const WideBvh<N>& bvh;
+    const Layout& bvh;
     bool closest(const Ray& ray, Hit& hit) const { return closest_hit<Robust, TriangleTest>(bvh, ray, hit); }
 };
 
@@ -24,11 +25,26 @@ auto with_modes(const CanopyOptions& o, F&& f) {
     return o.watertight ? f(std::false_type{}, Watertight{}) : f(std::false_type{}, Moller{});
 }
 
-using AnyLayout = std::variant<WideBvh<2>, WideBvh<4>, WideBvh<8>>;
+using AnyLayout = std::variant<WideBvh<2>, WideBvh<4>, WideBvh<8>, TwoLevelBvh<2>, TwoLevelBvh<4>, TwoLevelBvh<8>>;
 
 template <int N>
 void collapse_into(AnyLayout& layout, const Bvh& bvh, std::span<const Triangle> triangles) {
     if constexpr (kernel_compiled(N)) layout = collapse<N>(bvh, triangles);
+}
+
+template <int N>
+void build_two_level_into(AnyLayout& layout, const TwoLevelInput& input, const TwoLevelSettings& settings,
+                          TwoLevelTimes& times) {
+    if constexpr (kernel_compiled(N)) layout = build_two_level<N>(input, settings, &times);
+}
+
+template <class Layout>
+constexpr bool is_two_level = requires(const Layout& l) { l.instances; };
+
+TopLevel parse_top_level(const std::string& name) {
+    if (name == "two-level") return TopLevel::TwoLevel;
+    if (name == "rebraid") return TopLevel::Rebraid;
+    throw std::invalid_argument("unknown top level '" + name + "' (known: flat, two-level, rebraid)");
 }
 
 class CanopyAccelerator final : public Accelerator {
@@ -51,7 +67,8 @@ class CanopyAccelerator final : public Accelerator {
     }
 
 public:
-    CanopyAccelerator(const FlatScene& scene, const CanopyOptions& options)
+    // `objects` is the scene whose objects and instances a two-level top level is built over; null for flat.
+    CanopyAccelerator(const Scene* objects, const FlatScene& scene, const CanopyOptions& options)
         : scene_(scene), options_(options), builder_(find_builder(options.builder)), width_(kernel_width(options.kernel)) {
         if (width_ > 2) settings_.leaf_block = 4;  // the SIMD kernels test leaf triangles 4 at a time
         if (!options.start.empty()) {
@@ -61,22 +78,42 @@ public:
             find_builder(options.start);
             settings_.start = options.start;
         }
+        if (options.toplevel != "flat") {
+            two_level_settings_.top = parse_top_level(options.toplevel);
+            if (!objects) throw std::invalid_argument("top level '" + options.toplevel + "' needs the scene's objects");
+            two_level_settings_.blas_builder = options.builder;
+            two_level_settings_.blas = settings_;
+            two_level_input_ = two_level_input(*objects);
+        }
     }
 
     std::string library() const override { return "canopy"; }
     std::string builder() const override {
-        return builder_.default_start ? builder_.name + "<" + (settings_.start.empty() ? builder_.default_start : settings_.start)
-                                      : builder_.name;
+        const std::string name = builder_.default_start
+                                     ? builder_.name + "<" + (settings_.start.empty() ? builder_.default_start : settings_.start)
+                                     : builder_.name;
+        return two_level_input_ ? options_.toplevel + "/" + name : name;
     }
     std::string kernel() const override {
         return kernel_name(width_) + (options_.robust ? "" : " fast") + (options_.watertight ? "" : " mt");
     }
     std::string quality() const override { return ""; }
 
-    void prepare() override { refs_ = make_prim_refs(scene_.triangles); }
+    void prepare() override {
+        if (!two_level_input_) refs_ = make_prim_refs(scene_.triangles);
+    }
 
-    // The timed build: the builder's binary BVH and its collapse into the kernel's layout.
+    // The timed build: the builder's binary BVH and its collapse into the kernel's layout; for a two-level top
+    // level, every object's tree and the top level (object PrimRefs are made inside, and timed).
     void build() override {
+        if (two_level_input_) {
+            switch (width_) {
+                case 2: build_two_level_into<2>(layout_, *two_level_input_, two_level_settings_, two_level_times_); break;
+                case 4: build_two_level_into<4>(layout_, *two_level_input_, two_level_settings_, two_level_times_); break;
+                default: build_two_level_into<8>(layout_, *two_level_input_, two_level_settings_, two_level_times_); break;
+            }
+            return;
+        }
         binary_ = builder_.build(BuildInput{scene_.triangles, std::move(refs_)}, settings_);
         switch (width_) {
             case 2: collapse_into<2>(layout_, binary_, scene_.triangles); break;
@@ -87,13 +124,13 @@ public:
 
     uint64_t render(const ShadingScene& scene, const PinholeCamera& camera, uint32_t frame, Image& image,
                     const std::function<void(float)>& on_tile) const override {
-        return with_kernel([&]<int N, bool Robust, class Test>(const WideBvh<N>& bvh) {
-            return render_frame(CanopyTracer<N, Robust, Test>{bvh}, scene, camera, frame, image, on_tile);
+        return with_kernel([&]<int N, bool Robust, class Test>(const auto& bvh) {
+            return render_frame(CanopyTracer<std::decay_t<decltype(bvh)>, Robust, Test>{bvh}, scene, camera, frame, image, on_tile);
         });
     }
 
     Hit trace(const Ray& ray) const override {
-        return with_kernel([&]<int N, bool Robust, class Test>(const WideBvh<N>& bvh) {
+        return with_kernel([&]<int N, bool Robust, class Test>(const auto& bvh) {
             Hit hit;
             closest_hit<Robust, Test>(bvh, ray, hit);
             return hit;
@@ -101,7 +138,7 @@ public:
     }
 
     TraversalCounts count(const Ray& ray) const override {
-        return with_kernel([&]<int N, bool Robust, class Test>(const WideBvh<N>& bvh) {
+        return with_kernel([&]<int N, bool Robust, class Test>(const auto& bvh) {
             TraversalCounts counts;
             Hit hit;
             traverse<Query::Closest, Robust, Test>(bvh, ray, hit, counts);
@@ -110,6 +147,7 @@ public:
     }
 
     AcceleratorReport report() const override {
+        if (two_level_input_) return two_level_report();
         const TreeStats stats = tree_stats(binary_, scene_.triangles.size());
         AcceleratorReport r{sah_cost(binary_, SahCosts{}), epo_cost(binary_, scene_.triangles), {}, {}, stats.nodes,
                             stats.leaves, stats.depth, {}, stats.refs_per_triangle};
@@ -117,15 +155,34 @@ public:
             r.split_ms = binary_.split.split_ms;
             r.ref_capacity_per_tri = double(binary_.split.reference_capacity) / double(scene_.triangles.size());
         }
-        std::visit([&](const auto& bvh) {
-            r.bytes = bvh.bytes();
-            r.layout_sah = sah_cost(bvh);
-            r.layout_epo = epo_cost(bvh, scene_.triangles);
+        std::visit([&]<class Layout>(const Layout& bvh) {
+            if constexpr (!is_two_level<Layout>) {
+                r.bytes = bvh.bytes();
+                r.layout_sah = sah_cost(bvh);
+                r.layout_epo = epo_cost(bvh, scene_.triangles);
+            }
         }, layout_);
         return r;
     }
 
 private:
+    // SAH of the structure as traversal sees it (top level and object subtrees in world space); nodes are the
+    // top level's, leaves its BRefs.
+    AcceleratorReport two_level_report() const {
+        AcceleratorReport r;
+        r.objects_ms = two_level_times_.objects_ms;
+        r.top_level_ms = two_level_times_.top_level_ms;
+        std::visit([&]<class Layout>(const Layout& bvh) {
+            if constexpr (is_two_level<Layout>) {
+                r.layout_sah = sah_cost(bvh);
+                r.bytes = bvh.bytes();
+                r.nodes = bvh.nodes.size();
+                r.brefs = r.leaves = bvh.leaves.size();
+            }
+        }, layout_);
+        return r;
+    }
+
     const FlatScene& scene_;
     CanopyOptions options_;
     const BuilderEntry& builder_;
@@ -134,12 +191,44 @@ private:
     std::vector<PrimRef> refs_;
     Bvh binary_;
     AnyLayout layout_;
+    std::optional<TwoLevelInput> two_level_input_;
+    TwoLevelSettings two_level_settings_;
+    TwoLevelTimes two_level_times_;
 };
 
 }  // namespace
 
+TwoLevelInput two_level_input(const Scene& scene) {
+    TwoLevelInput input;
+    std::vector<std::vector<uint32_t>> object_ids(scene.meshes.size());
+    for (size_t m = 0; m < scene.meshes.size(); ++m) {
+        const Mesh& mesh = scene.meshes[m];
+        for (const Object& object : mesh.objects) {
+            object_ids[m].push_back(uint32_t(input.objects.size()));
+            std::vector<Triangle>& tris = input.objects.emplace_back();
+            tris.reserve(object.triangle_count);
+            for (uint32_t t = object.first_triangle; t < object.first_triangle + object.triangle_count; ++t) {
+                const glm::uvec3& f = mesh.triangles[t];
+                tris.push_back({mesh.positions[f.x], mesh.positions[f.y], mesh.positions[f.z]});
+            }
+        }
+    }
+    uint32_t offset = 0;
+    for (const Instance& instance : scene.instances) {
+        const Mesh& mesh = scene.meshes[instance.mesh];
+        for (size_t o = 0; o < mesh.objects.size(); ++o)
+            input.instances.push_back({object_ids[instance.mesh][o], instance.transform, offset + mesh.objects[o].first_triangle});
+        offset += uint32_t(mesh.triangles.size());
+    }
+    return input;
+}
+
 std::unique_ptr<Accelerator> make_canopy_accelerator(const FlatScene& scene, const CanopyOptions& options) {
-    return std::make_unique<CanopyAccelerator>(scene, options);
+    return std::make_unique<CanopyAccelerator>(nullptr, scene, options);
+}
+
+std::unique_ptr<Accelerator> make_canopy_accelerator(const Scene& scene, const FlatScene& flat, const CanopyOptions& options) {
+    return std::make_unique<CanopyAccelerator>(&scene, flat, options);
 }
 
 }  // namespace canopy

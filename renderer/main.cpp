@@ -22,6 +22,7 @@ using namespace canopy;
 
 struct RenderOptions {
     std::string scene, output = "canopy.exr", builder = "binned", start, kernel = "auto", accel = "canopy";
+    std::string toplevel = "flat";
     std::string embree_quality = "medium";
     int spp = 1, threads = 0, bounces = 8;
     std::vector<int> size{1024, 768};
@@ -46,7 +47,7 @@ void run_render(const RenderOptions& o) {
     const FlatScene flat = flatten(scene);
     std::unique_ptr<Accelerator> accel =
         o.accel == "embree" ? make_embree_accelerator(flat, o.embree_quality, o.threads)
-                            : make_canopy_accelerator(flat, {o.builder, o.start, o.kernel, o.traversal == "robust", o.intersector == "watertight"});
+                            : make_canopy_accelerator(scene, flat, {o.builder, o.start, o.kernel, o.traversal == "robust", o.intersector == "watertight", o.toplevel});
     const auto start = std::chrono::steady_clock::now();
     accel->prepare();
     accel->build();
@@ -97,6 +98,8 @@ int main(int argc, char** argv) {
     render->add_option("--size", r.size, "Width and height")->expected(2)->check(CLI::Range(1, 16384))->capture_default_str();
     render->add_option("--builder", r.builder, "BVH builder: " + builder_names())->capture_default_str();
     render->add_option("--start", r.start, "Optimisers: builder of the start tree (default: the optimiser's own)");
+    render->add_option("--toplevel", r.toplevel, "flat, two-level or rebraid")
+        ->check(CLI::IsMember({"flat", "two-level", "rebraid"}))->capture_default_str();
     render->add_option("--kernel", r.kernel, "Traversal kernel: auto (widest), bvh2, bvh4, bvh8")->capture_default_str();
     render->add_option("--accel", r.accel, "canopy or embree")->check(CLI::IsMember({"canopy", "embree"}))->capture_default_str();
     render->add_option("--embree-quality", r.embree_quality, "low, medium or high")->capture_default_str();
@@ -117,6 +120,8 @@ int main(int argc, char** argv) {
     bench->add_option("scene", b.scene, "Scene: scene.json, .obj or gen:NAME?tris=N&seed=S")->required();
     bench->add_option("--builder", b.builders, "Builders: " + builder_names())->delimiter(',')->capture_default_str();
     bench->add_option("--start", b.start, "Optimisers among the builders: builder of their start tree");
+    bench->add_option("--toplevel", b.toplevels, "Top levels: flat, two-level (object BVHs under a BVH over instances), rebraid (Benthin 2017)")
+        ->delimiter(',')->check(CLI::IsMember({"flat", "two-level", "rebraid"}))->capture_default_str();
     bench->add_option("--kernel", b.kernels, "Kernels: auto (widest), bvh2, bvh4, bvh8")->delimiter(',')->capture_default_str();
     bench->add_option("--accel", accels, "Reference accelerators in the same run: embree")->delimiter(',')
         ->check(CLI::IsMember({"embree"}));

@@ -1,0 +1,370 @@
+#include "accel/two_level.h"
+
+#include "accel/parallel.h"
+#include "accel/sparse_tree.h"
+
+#include <glm/gtc/matrix_inverse.hpp>
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+
+namespace canopy {
+
+BBox transform_bounds(const glm::mat4& m, const BBox& box) {
+    BBox out;
+    if (box.empty()) return out;
+    for (int corner = 0; corner < 8; ++corner) {
+        const glm::dvec3 p(corner & 1 ? box.upper.x : box.lower.x, corner & 2 ? box.upper.y : box.lower.y,
+                           corner & 4 ? box.upper.z : box.lower.z);
+        for (int a = 0; a < 3; ++a) {
+            const double exact = double(m[0][a]) * p.x + double(m[1][a]) * p.y + double(m[2][a]) * p.z + double(m[3][a]);
+            const float rounded = float(exact);
+            out.lower[a] = std::min(out.lower[a], double(rounded) <= exact ? rounded : std::nextafter(rounded, -INFINITY));
+            out.upper[a] = std::max(out.upper[a], double(rounded) >= exact ? rounded : std::nextafter(rounded, INFINITY));
+        }
+    }
+    return out;
+}
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double ms_since(Clock::time_point start) { return std::chrono::duration<double, std::milli>(Clock::now() - start).count(); }
+
+PlacedObject place(const TwoLevelInstance& instance) {
+    PlacedObject placed{instance.object, instance.prim_offset, instance.to_world == glm::mat4(1.0f)};
+    const glm::dmat4 inverse = glm::inverse(glm::dmat4(instance.to_world));
+    for (int row = 0; row < 3; ++row)
+        for (int col = 0; col < 4; ++col) placed.world_to_object[row][col] = float(inverse[col][row]);
+    return placed;
+}
+
+// A BVH node build reference (sec. 3.2): a node of an instance's object tree, its world bounds, and the
+// estimated number of triangles below it (the parent's divided by its child count, sec. 5.3).
+struct BRef {
+    BBox bounds;
+    uint32_t instance;
+    uint32_t child, count;  // as WideNode names a child: count 0 is an inner node
+    float prims;
+
+    bool openable() const { return count == 0; }
+};
+
+struct Segment {
+    uint32_t begin, end, extra_end;  // BRefs in [begin, end), free slots for opening in [end, extra_end) (sec. 5.2)
+};
+
+template <int N>
+class TopLevelBuilder {
+public:
+    TopLevelBuilder(const TwoLevelBvh<N>& bvh, const std::vector<TwoLevelInstance>& instances, const TwoLevelSettings& s)
+        : bvh_(bvh), instances_(instances), settings_(s), brefs_(capacity(bvh, instances, s)), nodes_(brefs_.size()) {}
+
+    Bvh build() {
+        for (uint32_t i = 0; i < instances_.size(); ++i) {
+            const WideBvh<N>& object = bvh_.objects[instances_[i].object];
+            brefs_[i] = {world_bounds(i, object.bounds), i, 0, 0, float(triangle_count(object))};
+        }
+        const Segment all{0, uint32_t(instances_.size()), uint32_t(brefs_.size())};
+        build_segment(all, 0, 1, settings_.top == TopLevel::Rebraid, 0);
+        Bvh top;
+        top.nodes = nodes_.finish();
+        return top;
+    }
+
+    const std::vector<BRef>& brefs() const { return brefs_; }
+
+private:
+    // Sec. 5.2: objects get #instances + max(#instances, #triangles / 1000) BRefs, instanced objects 4 x #instances.
+    static size_t capacity(const TwoLevelBvh<N>& bvh, const std::vector<TwoLevelInstance>& instances,
+                           const TwoLevelSettings& settings) {
+        if (settings.top == TopLevel::TwoLevel) return std::max<size_t>(instances.size(), 1);
+        const bool instanced = instances.size() > bvh.objects.size();
+        uint64_t triangles = 0;
+        for (const TwoLevelInstance& i : instances) triangles += triangle_count(bvh.objects[i.object]);
+        const size_t n = instances.size();
+        return std::max<size_t>(instanced ? 4 * n : n + std::max<size_t>(n, triangles / 1000), 1);
+    }
+
+    static uint64_t triangle_count(const WideBvh<N>& object) {
+        uint64_t n = 0;
+        for (const WideNode<N>& node : object.nodes)
+            for (int i = 0; i < N; ++i) n += node.count[i];
+        return n;
+    }
+
+    BBox world_bounds(uint32_t instance, const BBox& box) const {
+        return bvh_.instances[instance].identity ? box : transform_bounds(instances_[instance].to_world, box);
+    }
+
+    void build_segment(Segment s, uint32_t node, uint32_t descendants, bool open, uint32_t depth) {
+        if (open) open = worth_opening(s);
+        if (open) s.end = open_wide_brefs(s);
+        const BBox bounds = bounds_of(s);
+        if (s.end - s.begin == 1) return nodes_.set_leaf(node, bounds, s.begin, 1);
+        const uint32_t mid = partition(s, depth);
+        const auto [left, right] = share_free_space(s, mid);
+        const auto [left_descendants, right_descendants] =
+            nodes_.set_inner(node, bounds, descendants, left.extra_end - left.begin);
+        parallel::fork_join(
+            s.end - s.begin, 64,
+            [&, left = left, ld = left_descendants] { build_segment(left, descendants, ld, open, depth + 1); },
+            [&, right = right, rd = right_descendants] { build_segment(right, descendants + 1, rd, open, depth + 1); });
+    }
+
+    // Sec. 4.4: no opening once a segment holds one instance only, or at most 4 BRefs that barely overlap (no
+    // pair whose common box has a tenth of the smaller one's area). Stopping holds for the whole subtree.
+    bool worth_opening(const Segment& s) const {
+        bool single = true;
+        for (uint32_t i = s.begin + 1; i < s.end; ++i) single &= brefs_[i].instance == brefs_[s.begin].instance;
+        if (single) return false;
+        if (s.end - s.begin > 4) return true;
+        for (uint32_t i = s.begin; i < s.end; ++i)
+            for (uint32_t j = i + 1; j < s.end; ++j) {
+                const BBox& a = brefs_[i].bounds;
+                const BBox& b = brefs_[j].bounds;
+                const BBox common{glm::max(a.lower, b.lower), glm::min(a.upper, b.upper)};
+                if (!common.empty() && common.half_area() > 0.1f * std::min(a.half_area(), b.half_area())) return true;
+            }
+        return false;
+    }
+
+    // Sec. 4.2 and 5.3: every inner BRef wider than open_extent of the segment's largest extent is replaced by
+    // its children: the first in its slot, the others appended while the segment's free space lasts.
+    uint32_t open_wide_brefs(const Segment& s) {
+        const BBox bounds = bounds_of(s);
+        const int dim = bounds.largest_axis();
+        const float threshold = settings_.open_extent * bounds.extent()[dim];
+        uint32_t end = s.end;
+        for (uint32_t i = s.begin; i < s.end; ++i) {
+            const BRef parent = brefs_[i];
+            if (!parent.openable() || !(parent.bounds.extent()[dim] > threshold)) continue;
+            const WideNode<N>& node = bvh_.objects[bvh_.instances[parent.instance].object].nodes[parent.child];
+            int children = 0;
+            for (int c = 0; c < N; ++c) children += !node.is_empty(c);
+            if (end + uint32_t(children - 1) > s.extra_end) break;  // out of space: the rest stay closed
+            bool first = true;
+            for (int c = 0; c < N; ++c) {
+                if (node.is_empty(c)) continue;
+                BBox box;
+                for (int a = 0; a < 3; ++a) box.lower[a] = node.lower(a, c), box.upper[a] = node.upper(a, c);
+                const BRef child{world_bounds(parent.instance, box), parent.instance, node.child[c], node.count[c],
+                                 estimated_prims(node, c, parent.prims / float(children))};
+                brefs_[first ? i : end++] = child;
+                first = false;
+            }
+        }
+        return end;
+    }
+
+    // Sec. 5.3 estimates a child's triangles as the parent's divided by its children; a leaf child's count is
+    // in the node already, so it is exact.
+    static float estimated_prims(const WideNode<N>& node, int c, float estimate) {
+        return node.is_leaf(c) ? float(node.count[c]) : estimate;
+    }
+
+    BBox bounds_of(const Segment& s) const {
+        BBox b;
+        for (uint32_t i = s.begin; i < s.end; ++i) b.extend(brefs_[i].bounds);
+        return b;
+    }
+
+    // Sec. 4.3: binned SAH over BRef centroids, each bin weighted by its BRefs' estimated triangle counts.
+    // Returns the first BRef of the right side.
+    uint32_t partition(const Segment& s, uint32_t depth) {
+        BBox centroids;
+        for (uint32_t i = s.begin; i < s.end; ++i) centroids.extend(brefs_[i].bounds.center());
+        const int bins = int(settings_.bins);
+        int best_axis = -1, best_bin = 0;
+        float best_cost = INFINITY;
+        for (int axis = 0; axis < 3 && depth < kMedianFallbackDepth; ++axis) {
+            const float extent = centroids.extent()[axis];
+            if (!(extent > 0.0f)) continue;
+            std::vector<BBox> box(static_cast<size_t>(bins));
+            std::vector<float> weight(size_t(bins), 0.0f);
+            for (uint32_t i = s.begin; i < s.end; ++i) {
+                const int b = bin_of(brefs_[i], centroids, axis, bins);
+                box[size_t(b)].extend(brefs_[i].bounds);
+                weight[size_t(b)] += brefs_[i].prims;
+            }
+            std::vector<float> right_cost(size_t(bins), 0.0f);
+            BBox right;
+            float right_weight = 0.0f;
+            for (int b = bins - 1; b > 0; --b) {
+                right.extend(box[size_t(b)]), right_weight += weight[size_t(b)];
+                right_cost[size_t(b)] = right.half_area() * right_weight;
+            }
+            BBox left;
+            float left_weight = 0.0f;
+            for (int b = 1; b < bins; ++b) {
+                left.extend(box[size_t(b - 1)]), left_weight += weight[size_t(b - 1)];
+                const float cost = left.half_area() * left_weight + right_cost[size_t(b)];
+                if (left_weight > 0.0f && right_cost[size_t(b)] > 0.0f && cost < best_cost)
+                    best_cost = cost, best_axis = axis, best_bin = b;
+            }
+        }
+        if (best_axis < 0) return median_split(s, centroids);
+        BRef* first = brefs_.data() + s.begin;
+        BRef* mid = std::partition(first, brefs_.data() + s.end, [&](const BRef& r) {
+            return bin_of(r, centroids, best_axis, bins) < best_bin;
+        });
+        return uint32_t(mid - brefs_.data());
+    }
+
+    static int bin_of(const BRef& r, const BBox& centroids, int axis, int bins) {
+        const float scale = float(bins) * (1.0f - 1e-6f) / centroids.extent()[axis];
+        return std::clamp(int((r.bounds.center()[axis] - centroids.lower[axis]) * scale), 0, bins - 1);
+    }
+
+    // All centroids in one point (or too deep): split in the middle of the largest axis's order.
+    uint32_t median_split(const Segment& s, const BBox& centroids) {
+        const int axis = centroids.largest_axis();
+        const uint32_t mid = s.begin + (s.end - s.begin) / 2;
+        std::nth_element(brefs_.begin() + s.begin, brefs_.begin() + mid, brefs_.begin() + s.end,
+                         [&](const BRef& a, const BRef& b) {
+                             const float ca = a.bounds.center()[axis], cb = b.bounds.center()[axis];
+                             return ca < cb || (ca == cb && (a.instance < b.instance || (a.instance == b.instance && a.child < b.child)));
+                         });
+        return mid;
+    }
+
+    // Sec. 5.2: the free space goes to the children in proportion to their openable BRefs (to their sizes when
+    // neither has any); the right side moves up to make room for the left's share.
+    std::pair<Segment, Segment> share_free_space(const Segment& s, uint32_t mid) {
+        uint64_t open_left = 0, open_right = 0;
+        for (uint32_t i = s.begin; i < mid; ++i) open_left += brefs_[i].openable();
+        for (uint32_t i = mid; i < s.end; ++i) open_right += brefs_[i].openable();
+        if (open_left + open_right == 0) open_left = mid - s.begin, open_right = s.end - mid;
+        const uint32_t free = s.extra_end - s.end;
+        const uint32_t left_free = uint32_t(uint64_t(free) * open_left / (open_left + open_right));
+        if (left_free) std::move_backward(brefs_.begin() + mid, brefs_.begin() + s.end, brefs_.begin() + s.end + left_free);
+        return {Segment{s.begin, mid, mid + left_free}, Segment{mid + left_free, s.end + left_free, s.extra_end}};
+    }
+
+    const TwoLevelBvh<N>& bvh_;
+    const std::vector<TwoLevelInstance>& instances_;
+    const TwoLevelSettings& settings_;
+    std::vector<BRef> brefs_;
+    SparseTree nodes_;
+};
+
+uint32_t one_entry_per_ref(int, uint32_t count) { return count; }
+
+}  // namespace
+
+template <int N>
+uint64_t TwoLevelBvh<N>::bytes() const {
+    uint64_t total = nodes.size() * sizeof(WideNode<N>) + leaves.size() * sizeof(TopLevelRef) +
+                     instances.size() * sizeof(PlacedObject);
+    for (const WideBvh<N>& object : objects) total += object.bytes();
+    return total;
+}
+
+template <int N>
+void build_top_level(TwoLevelBvh<N>& bvh, const std::vector<TwoLevelInstance>& instances, const TwoLevelSettings& settings) {
+    bvh.instances.resize(instances.size());
+    bvh.to_world.resize(instances.size());
+    for (size_t i = 0; i < instances.size(); ++i) bvh.instances[i] = place(instances[i]), bvh.to_world[i] = instances[i].to_world;
+    bvh.nodes.clear();
+    bvh.leaves.clear();
+    bvh.bounds = BBox{};
+    if (instances.empty()) return;
+    TopLevelBuilder<N> builder(bvh, instances, settings);
+    const Bvh top = builder.build();
+    bvh.bounds = top.nodes[0].bounds;
+    uint32_t entries = 0;
+    const std::vector<LeafRun> runs = collapse_nodes<N>(top, bvh.nodes, &one_entry_per_ref, entries);
+    bvh.leaves.resize(entries);
+    for (const LeafRun& run : runs) {
+        const BRef& r = builder.brefs()[run.first_ref];
+        bvh.leaves[run.first_entry] = {r.instance, r.child, r.count};
+    }
+}
+
+template <int N>
+TwoLevelBvh<N> build_two_level(const TwoLevelInput& input, const TwoLevelSettings& settings, TwoLevelTimes* times) {
+    TwoLevelBvh<N> bvh;
+    const BuilderEntry& builder = find_builder(settings.blas_builder);
+    auto start = Clock::now();
+    bvh.objects.resize(input.objects.size());
+    parallel::for_each(input.objects.size(), 1, [&](size_t i) {
+        const std::vector<Triangle>& triangles = input.objects[i];
+        if (triangles.empty()) return;
+        const Bvh object = builder.build(BuildInput{triangles, make_prim_refs(triangles)}, settings.blas);
+        bvh.objects[i] = collapse<N>(object, triangles);
+    });
+    if (times) times->objects_ms = ms_since(start);
+    start = Clock::now();
+    std::vector<TwoLevelInstance> placed;  // instances of empty objects have nothing to trace
+    for (const TwoLevelInstance& instance : input.instances)
+        if (!input.objects[instance.object].empty()) placed.push_back(instance);
+    build_top_level(bvh, placed, settings);
+    if (times) times->top_level_ms = ms_since(start);
+    return bvh;
+}
+
+namespace {
+
+BBox child_box(const auto& node, int c) {
+    BBox box;
+    for (int a = 0; a < 3; ++a) box.lower[a] = node.lower(a, c), box.upper[a] = node.upper(a, c);
+    return box;
+}
+
+// The cost below one object-tree entry whose world box is `box`: C_tri per triangle of a leaf, C_inn per node.
+template <int N>
+double object_cost(const TwoLevelBvh<N>& bvh, const TopLevelRef& entry, const BBox& box, SahCosts costs) {
+    if (entry.count) return costs.triangle * double(entry.count) * box.half_area();
+    const PlacedObject& instance = bvh.instances[entry.instance];
+    const WideNode<N>& node = bvh.objects[instance.object].nodes[entry.child];
+    double sum = costs.inner * box.half_area();
+    for (int c = 0; c < N; ++c) {
+        if (node.is_empty(c)) continue;
+        const BBox local = child_box(node, c);
+        const BBox world = instance.identity ? local : transform_bounds(bvh.to_world[entry.instance], local);
+        sum += object_cost(bvh, {entry.instance, node.child[c], node.count[c]}, world, costs);
+    }
+    return sum;
+}
+
+template <int N>
+double top_cost(const TwoLevelBvh<N>& bvh, uint32_t index, const BBox& box, SahCosts costs) {
+    const WideNode<N>& node = bvh.nodes[index];
+    double sum = costs.inner * box.half_area();
+    for (int c = 0; c < N; ++c) {
+        if (node.is_empty(c)) continue;
+        if (!node.is_leaf(c)) {
+            sum += top_cost(bvh, node.child[c], child_box(node, c), costs);
+            continue;
+        }
+        for (uint32_t i = node.child[c]; i < node.child[c] + node.count[c]; ++i)
+            sum += object_cost(bvh, bvh.leaves[i], child_box(node, c), costs);
+    }
+    return sum;
+}
+
+}  // namespace
+
+template <int N>
+double sah_cost(const TwoLevelBvh<N>& bvh, SahCosts costs) {
+    const double root = bvh.bounds.half_area();
+    return bvh.nodes.empty() || !(root > 0.0) ? 0.0 : top_cost(bvh, 0, bvh.bounds, costs) / root;
+}
+
+template double sah_cost<2>(const TwoLevelBvh<2>&, SahCosts);
+template double sah_cost<4>(const TwoLevelBvh<4>&, SahCosts);
+template double sah_cost<8>(const TwoLevelBvh<8>&, SahCosts);
+template struct TwoLevelBvh<2>;
+template struct TwoLevelBvh<4>;
+template struct TwoLevelBvh<8>;
+template TwoLevelBvh<2> build_two_level<2>(const TwoLevelInput&, const TwoLevelSettings&, TwoLevelTimes*);
+template TwoLevelBvh<4> build_two_level<4>(const TwoLevelInput&, const TwoLevelSettings&, TwoLevelTimes*);
+template TwoLevelBvh<8> build_two_level<8>(const TwoLevelInput&, const TwoLevelSettings&, TwoLevelTimes*);
+template void build_top_level<2>(TwoLevelBvh<2>&, const std::vector<TwoLevelInstance>&, const TwoLevelSettings&);
+template void build_top_level<4>(TwoLevelBvh<4>&, const std::vector<TwoLevelInstance>&, const TwoLevelSettings&);
+template void build_top_level<8>(TwoLevelBvh<8>&, const std::vector<TwoLevelInstance>&, const TwoLevelSettings&);
+
+}  // namespace canopy

@@ -1,0 +1,98 @@
+#pragma once
+// Two-level BVHs over objects and instances, and partial re-braiding (Benthin, Woop, Wald and Áfra 2017,
+// "Improved Two-Level BVHs using Partial Re-Braiding"). Each object gets its own BVH in object space; instances
+// place objects with affine transforms; the top level is built over BRefs (sec. 3.2): references to nodes of
+// object BVHs with their world bounds. The plain two-level top level keeps one BRef per instance, at the object
+// root; re-braiding opens BRefs where objects overlap (sec. 4), so the top level reaches into object trees.
+#include "accel/builder.h"
+#include "accel/wide_bvh.h"
+
+#include <glm/mat4x4.hpp>
+
+#include <vector>
+
+namespace canopy {
+
+// An object BVH placed in the world. prim_offset turns the object's triangle ids into scene-wide ones.
+struct TwoLevelInstance {
+    uint32_t object = 0;
+    glm::mat4 to_world{1.0f};
+    uint32_t prim_offset = 0;
+};
+
+struct TwoLevelInput {
+    std::vector<std::vector<Triangle>> objects;  // object-space triangles; an object's prims are 0..n-1
+    std::vector<TwoLevelInstance> instances;
+};
+
+enum class TopLevel { TwoLevel, Rebraid };
+
+struct TwoLevelSettings {
+    std::string blas_builder = "binned";  // any registered builder, for every object BVH
+    BuildSettings blas;                   // their settings (leaf_block follows the kernel)
+    TopLevel top = TopLevel::Rebraid;
+    float open_extent = 0.1f;             // sec. 4.2: open BRefs wider than this share of the segment's extent
+    uint32_t bins = 32;
+};
+
+// The ray's way into an instance: world to object space, or nothing for an identity placement.
+struct PlacedObject {
+    uint32_t object = 0;
+    uint32_t prim_offset = 0;
+    bool identity = true;
+    float world_to_object[3][4] = {};  // rows of the affine inverse
+
+    Vec3 point(const Vec3& p) const {
+        return {world_to_object[0][0] * p.x + world_to_object[0][1] * p.y + world_to_object[0][2] * p.z + world_to_object[0][3],
+                world_to_object[1][0] * p.x + world_to_object[1][1] * p.y + world_to_object[1][2] * p.z + world_to_object[1][3],
+                world_to_object[2][0] * p.x + world_to_object[2][1] * p.y + world_to_object[2][2] * p.z + world_to_object[2][3]};
+    }
+    Vec3 vector(const Vec3& v) const {
+        return {world_to_object[0][0] * v.x + world_to_object[0][1] * v.y + world_to_object[0][2] * v.z,
+                world_to_object[1][0] * v.x + world_to_object[1][1] * v.y + world_to_object[1][2] * v.z,
+                world_to_object[2][0] * v.x + world_to_object[2][1] * v.y + world_to_object[2][2] * v.z};
+    }
+};
+
+// A top-level leaf entry: a node (count 0) or leaf (count > 0) of an instance's object tree, as WideNode names
+// its children, so traversal can enter the object tree there.
+struct TopLevelRef {
+    uint32_t instance;
+    uint32_t child, count;
+};
+
+template <int N>
+struct TwoLevelBvh {
+    static constexpr int kWidth = N;
+    std::vector<WideBvh<N>> objects;
+    std::vector<PlacedObject> instances;
+    std::vector<glm::mat4> to_world;  // per instance, for metrics (traversal only needs the inverse)
+    WideNodes<N> nodes;              // the top level; each of its leaves holds one TopLevelRef
+    std::vector<TopLevelRef> leaves;
+    BBox bounds;
+
+    uint64_t bytes() const;  // top level, object trees once each, instances
+};
+
+struct TwoLevelTimes {
+    double objects_ms = 0;    // every object BVH, built in parallel
+    double top_level_ms = 0;  // BRef setup, top-level build and its collapse
+};
+
+// Builds every object tree (in parallel across objects) and the top level. Deterministic for any thread count.
+template <int N>
+TwoLevelBvh<N> build_two_level(const TwoLevelInput& input, const TwoLevelSettings& settings, TwoLevelTimes* times = nullptr);
+
+// Rebuilds only the top level over the existing object trees (instances may have moved).
+template <int N>
+void build_top_level(TwoLevelBvh<N>& bvh, const std::vector<TwoLevelInstance>& instances, const TwoLevelSettings& settings);
+
+// Eq. 1 over the whole two-level structure as traversal sees it: top-level nodes, then for each top-level
+// leaf the object subtree below its entry, every box in world space (conservatively transformed).
+template <int N>
+double sah_cost(const TwoLevelBvh<N>& bvh, SahCosts costs = {});
+
+// The box of `box` transformed by `m`, rounded outwards so that it contains every transformed point.
+BBox transform_bounds(const glm::mat4& m, const BBox& box);
+
+}  // namespace canopy
