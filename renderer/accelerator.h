@@ -30,6 +30,9 @@ public:
     virtual std::string builder() const = 0;  // canopy builder name, or null-like "" for embree
     virtual std::string kernel() const = 0;  // canopy: width and modes, e.g. "bvh8" or "bvh8 fast mt"
     virtual std::string quality() const = 0;  // embree build quality, "" for canopy
+    // `--builder auto`: what it chose (builder, with "two-level/" in front when it chose that) and why.
+    virtual std::string chosen() const { return ""; }
+    virtual std::string reason() const { return ""; }
 
     // Untimed preparation for one build (canopy: PrimRef generation), then the timed build.
     virtual void prepare() = 0;
@@ -53,6 +56,9 @@ struct CanopyOptions {
     // flat: one BVH over world triangles; two-level: object BVHs (built by `builder`) under a top level over
     // instances; rebraid: that top level opening object BVHs where they overlap (Benthin et al. 2017).
     std::string toplevel = "flat";
+    // builder "auto" plans for this many frames of this many pixels (time to image = build + frames x frame).
+    int frames_planned = 16;
+    uint64_t pixels = 1024 * 768;
 };
 
 // Throws std::invalid_argument for an unknown builder or kernel, or a two-level top level (it needs the scene).

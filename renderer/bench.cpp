@@ -40,14 +40,15 @@ struct Entry {
     double frame_mean() const { return mean(frame_ms); }
     double rays_per_frame() const { return double(rays) / double(frame_ms.size()); }
     std::string label() const {
-        return accel->library() == "embree" ? "embree " + accel->quality()
-                                            : accel->builder() + " " + accel->kernel();
+        if (accel->library() == "embree") return "embree " + accel->quality();
+        const std::string chosen = accel->chosen();
+        return accel->builder() + (chosen.empty() ? "" : "(" + chosen + ")") + " " + accel->kernel();
     }
 };
 
 // --start applies to the optimisers in a bench; plain builders in the same run ignore it.
 std::string optimiser_start(const std::string& builder, const std::string& start) {
-    return find_builder(builder).default_start ? start : "";
+    return builder != "auto" && find_builder(builder).default_start ? start : "";
 }
 
 std::vector<Entry> make_entries(const Scene& scene, const FlatScene& flat, const BenchOptions& o) {
@@ -59,7 +60,8 @@ std::vector<Entry> make_entries(const Scene& scene, const FlatScene& flat, const
                     for (const std::string& intersector : o.intersectors)
                         entries.push_back({make_canopy_accelerator(
                             scene, flat, {builder, optimiser_start(builder, o.start), kernel, traversal == "robust",
-                                          intersector == "watertight", toplevel})});
+                                          intersector == "watertight", toplevel, o.frames_planned,
+                                          uint64_t(o.width) * uint64_t(o.height)})});
     for (const std::string& quality : o.embree_qualities)
         entries.push_back({make_embree_accelerator(flat, quality, o.threads)});
     return entries;
@@ -117,6 +119,8 @@ nlohmann::json to_json(const std::vector<Entry>& entries, const BenchOptions& o,
         results.push_back({{"accel", e.accel->library()},
                            {"builder", canopy ? nlohmann::json(e.accel->builder()) : nlohmann::json(nullptr)},
                            {"kernel", canopy ? nlohmann::json(e.accel->kernel()) : nlohmann::json(nullptr)},
+                           {"chosen", e.accel->chosen().empty() ? nlohmann::json(nullptr) : nlohmann::json(e.accel->chosen())},
+                           {"reason", e.accel->reason().empty() ? nlohmann::json(nullptr) : nlohmann::json(e.accel->reason())},
                            {"quality", canopy ? nlohmann::json(nullptr) : nlohmann::json(e.accel->quality())},
                            {"build_ms_min", e.build_min()},
                            {"build_ms_median", median(e.build_ms)},
@@ -192,6 +196,8 @@ void run_bench(const BenchOptions& o) {
     }
 
     print_table(entries, tris);
+    for (const Entry& e : entries)
+        if (!e.accel->reason().empty()) std::printf("%s: %s\n", e.label().c_str(), e.accel->reason().c_str());
     if (!o.json_path.empty()) {
         std::ofstream out(o.json_path);
         out << to_json(entries, o, tris).dump(2) << "\n";

@@ -4,6 +4,7 @@
 #include "kernels/traverse.h"
 #include "kernels/traverse_two_level.h"
 #include "renderer/accelerator.h"
+#include "renderer/auto_builder.h"
 
 #include <variant>
 
@@ -196,6 +197,56 @@ private:
     TwoLevelTimes two_level_times_;
 };
 
+// `--builder auto`: each build computes the scene statistics, chooses (renderer/auto_builder.h) and builds with
+// the chosen accelerator; all of it is timed, including the chosen builder's PrimRefs, which other rows prepare
+// untimed. The chosen accelerator is kept while the choice stays the same (it always does for one scene).
+class AutoAccelerator final : public Accelerator {
+public:
+    AutoAccelerator(const Scene& scene, const FlatScene& flat, const CanopyOptions& options)
+        : scene_(scene), flat_(flat), options_(options) {}
+
+    std::string library() const override { return "canopy"; }
+    std::string builder() const override { return "auto"; }
+    std::string kernel() const override { return chosen_ ? chosen_->kernel() : kernel_name(kernel_width(options_.kernel)); }
+    std::string quality() const override { return ""; }
+    std::string chosen() const override { return chosen_ ? chosen_->builder() : ""; }
+    std::string reason() const override { return choice_.reason; }
+
+    void prepare() override {}
+
+    void build() override {
+        const AutoChoice choice = choose_builder(scene_statistics(scene_, flat_), options_.frames_planned, options_.pixels);
+        if (!chosen_ || choice.builder != choice_.builder || choice.toplevel != choice_.toplevel) {
+            CanopyOptions options = options_;
+            options.builder = choice.builder, options.toplevel = choice.toplevel, options.start.clear();
+            chosen_ = std::make_unique<CanopyAccelerator>(&scene_, flat_, options);
+        }
+        choice_ = choice;
+        chosen_->prepare();
+        chosen_->build();
+    }
+
+    uint64_t render(const ShadingScene& scene, const PinholeCamera& camera, uint32_t frame, Image& image,
+                    const std::function<void(float)>& on_tile) const override {
+        return built().render(scene, camera, frame, image, on_tile);
+    }
+    Hit trace(const Ray& ray) const override { return built().trace(ray); }
+    TraversalCounts count(const Ray& ray) const override { return built().count(ray); }
+    AcceleratorReport report() const override { return built().report(); }
+
+private:
+    const Accelerator& built() const {
+        if (!chosen_) throw std::logic_error("auto accelerator used before build()");
+        return *chosen_;
+    }
+
+    const Scene& scene_;
+    const FlatScene& flat_;
+    CanopyOptions options_;
+    AutoChoice choice_;
+    std::unique_ptr<Accelerator> chosen_;
+};
+
 }  // namespace
 
 TwoLevelInput two_level_input(const Scene& scene) {
@@ -224,10 +275,17 @@ TwoLevelInput two_level_input(const Scene& scene) {
 }
 
 std::unique_ptr<Accelerator> make_canopy_accelerator(const FlatScene& scene, const CanopyOptions& options) {
+    if (options.builder == "auto") throw std::invalid_argument("builder 'auto' needs the scene's objects and instances");
     return std::make_unique<CanopyAccelerator>(nullptr, scene, options);
 }
 
 std::unique_ptr<Accelerator> make_canopy_accelerator(const Scene& scene, const FlatScene& flat, const CanopyOptions& options) {
+    if (options.builder == "auto") {
+        if (options.toplevel != "flat") throw std::invalid_argument("builder 'auto' chooses the top level itself: drop --toplevel");
+        if (options.frames_planned < 1) throw std::invalid_argument("--frames-planned must be at least 1");
+        kernel_width(options.kernel);  // an unknown kernel fails here, not at the first build
+        return std::make_unique<AutoAccelerator>(scene, flat, options);
+    }
     return std::make_unique<CanopyAccelerator>(&scene, flat, options);
 }
 

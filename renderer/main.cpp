@@ -23,6 +23,7 @@ using namespace canopy;
 struct RenderOptions {
     std::string scene, output = "canopy.exr", builder = "binned", start, kernel = "auto", accel = "canopy";
     std::string toplevel = "flat";
+    int frames_planned = 0;
     std::string embree_quality = "medium";
     int spp = 1, threads = 0, bounces = 8;
     std::vector<int> size{1024, 768};
@@ -33,7 +34,7 @@ struct RenderOptions {
 std::string builder_names() {
     std::string names;
     for (const BuilderEntry& b : builders()) names += (names.empty() ? "" : ", ") + b.name;
-    return names;
+    return names + ", or auto (chosen from scene statistics for --frames-planned)";
 }
 
 void print_progress(float fraction) {
@@ -47,7 +48,9 @@ void run_render(const RenderOptions& o) {
     const FlatScene flat = flatten(scene);
     std::unique_ptr<Accelerator> accel =
         o.accel == "embree" ? make_embree_accelerator(flat, o.embree_quality, o.threads)
-                            : make_canopy_accelerator(scene, flat, {o.builder, o.start, o.kernel, o.traversal == "robust", o.intersector == "watertight", o.toplevel});
+                            : make_canopy_accelerator(scene, flat, {o.builder, o.start, o.kernel, o.traversal == "robust", o.intersector == "watertight", o.toplevel,
+                                                                   o.frames_planned ? o.frames_planned : o.spp,
+                                                                   uint64_t(o.size[0]) * uint64_t(o.size[1])});
     const auto start = std::chrono::steady_clock::now();
     accel->prepare();
     accel->build();
@@ -79,7 +82,9 @@ void run_render(const RenderOptions& o) {
     write_exr(o.output, o.size[0], o.size[1], image.average(o.spp));
     std::printf("%s: %zu triangles, %s build %.1f ms, %d spp in %.2f s (%.2f Mrays/s), mean %.5f -> %s\n",
                 o.scene.empty() ? "default scene" : o.scene.c_str(), flat.triangles.size(),
-                o.accel == "embree" ? ("embree " + o.embree_quality).c_str() : accel->builder().c_str(), build_ms, o.spp,
+                o.accel == "embree" ? ("embree " + o.embree_quality).c_str()
+                                     : (accel->builder() + (accel->chosen().empty() ? "" : " -> " + accel->chosen())).c_str(),
+                build_ms, o.spp,
                 render_s, double(rays) / render_s / 1e6, image.mean(o.spp), o.output.c_str());
 }
 
@@ -100,6 +105,8 @@ int main(int argc, char** argv) {
     render->add_option("--start", r.start, "Optimisers: builder of the start tree (default: the optimiser's own)");
     render->add_option("--toplevel", r.toplevel, "flat, two-level or rebraid")
         ->check(CLI::IsMember({"flat", "two-level", "rebraid"}))->capture_default_str();
+    render->add_option("--frames-planned", r.frames_planned, "Frames that --builder auto plans for (default: --spp)")
+        ->check(CLI::Range(1, 1 << 24));
     render->add_option("--kernel", r.kernel, "Traversal kernel: auto (widest), bvh2, bvh4, bvh8")->capture_default_str();
     render->add_option("--accel", r.accel, "canopy or embree")->check(CLI::IsMember({"canopy", "embree"}))->capture_default_str();
     render->add_option("--embree-quality", r.embree_quality, "low, medium or high")->capture_default_str();
@@ -122,6 +129,8 @@ int main(int argc, char** argv) {
     bench->add_option("--start", b.start, "Optimisers among the builders: builder of their start tree");
     bench->add_option("--toplevel", b.toplevels, "Top levels: flat, two-level (object BVHs under a BVH over instances), rebraid (Benthin 2017)")
         ->delimiter(',')->check(CLI::IsMember({"flat", "two-level", "rebraid"}))->capture_default_str();
+    bench->add_option("--frames-planned", b.frames_planned, "Frames that --builder auto plans time to image for")
+        ->check(CLI::Range(1, 1 << 24))->capture_default_str();
     bench->add_option("--kernel", b.kernels, "Kernels: auto (widest), bvh2, bvh4, bvh8")->delimiter(',')->capture_default_str();
     bench->add_option("--accel", accels, "Reference accelerators in the same run: embree")->delimiter(',')
         ->check(CLI::IsMember({"embree"}));

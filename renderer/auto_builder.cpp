@@ -1,0 +1,83 @@
+#include "renderer/auto_builder.h"
+
+#include "accel/builder.h"
+#include "accel/parallel.h"
+
+#include <cstdio>
+#include <limits>
+
+namespace canopy {
+
+SceneStatistics scene_statistics(const Scene& scene, const FlatScene& flat) {
+    SceneStatistics s;
+    s.triangles = flat.triangles.size();
+    for (const Mesh& mesh : scene.meshes) s.unique_triangles += mesh.triangles.size();
+    for (const Instance& instance : scene.instances)
+        for (const Object& object : scene.meshes[instance.mesh].objects) s.placements += object.triangle_count > 0;
+    using Sums = std::pair<double, double>;  // box half areas, twice the triangle areas
+    const Sums sums = parallel::reduce(
+        flat.triangles.size(), 16 * 1024, Sums{0.0, 0.0},
+        [&](size_t begin, size_t end) {
+            Sums partial{0.0, 0.0};
+            for (size_t i = begin; i < end; ++i) {
+                partial.first += BBox::of(flat.triangles[i]).half_area();
+                partial.second += 2.0 * triangle_area(flat.triangles[i]);
+            }
+            return partial;
+        },
+        [](const Sums& a, const Sums& b) { return Sums{a.first + b.first, a.second + b.second}; });
+    s.box_excess = sums.second > 0.0 ? sums.first / sums.second : 1.0;
+    return s;
+}
+
+namespace {
+
+// A candidate's cost model, from `canopy bench` on the project machine (README, "Choosing a builder"): build
+// time per triangle built, and frame time relative to binned SAH's as a function of the scene's box excess.
+struct Candidate {
+    const char* builder;
+    const char* toplevel;
+    double build_ns_per_triangle;
+    double (*relative_frame)(const SceneStatistics&);
+};
+
+double same_as_binned(const SceneStatistics&) { return 1.0; }
+double lbvh_frame(const SceneStatistics&) { return 1.2; }
+double sweep_frame(const SceneStatistics&) { return 0.98; }
+
+constexpr Candidate kCandidates[] = {
+    {"binned", "flat", 210.0, &same_as_binned},
+    {"lbvh", "flat", 80.0, &lbvh_frame},
+    {"sweep", "flat", 450.0, &sweep_frame},
+    // Instanced objects: each unique triangle is built once; traversal measured level with flat on zoo-64.
+    {"binned", "two-level", 600.0, &same_as_binned},
+};
+
+// Protocol paths of 9 rays at about 250 ns per ray per pixel on the project machine (BENCHMARK.md scenes).
+constexpr double kFrameNsPerPixel = 9 * 250.0;
+
+}  // namespace
+
+AutoChoice choose_builder(const SceneStatistics& stats, int frames, uint64_t pixels) {
+    const bool instanced = stats.triangles > stats.unique_triangles;
+    AutoChoice best;
+    double best_ms = std::numeric_limits<double>::infinity(), frame_ms = 0.0, build_ms = 0.0;
+    for (const Candidate& c : kCandidates) {
+        const bool two_level = std::string(c.toplevel) == "two-level";
+        if (two_level != instanced) continue;  // two-level only with instances, and then always
+        const double built = double(two_level ? stats.unique_triangles : stats.triangles);
+        const double build = built * c.build_ns_per_triangle * 1e-6;
+        const double frame = double(pixels) * kFrameNsPerPixel * 1e-6 * c.relative_frame(stats);
+        const double total = build + double(frames) * frame;
+        if (total < best_ms) best_ms = total, best = {c.builder, c.toplevel, ""}, frame_ms = frame, build_ms = build;
+    }
+    char reason[320];
+    std::snprintf(reason, sizeof reason,
+                  "%llu triangles (%llu unique), box excess %.2f, %d frames planned: predicted build %.0f ms + %d x %.0f ms",
+                  (unsigned long long)stats.triangles, (unsigned long long)stats.unique_triangles, stats.box_excess,
+                  frames, build_ms, frames, frame_ms);
+    best.reason = reason;
+    return best;
+}
+
+}  // namespace canopy
