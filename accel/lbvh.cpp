@@ -4,7 +4,6 @@
 
 #include <array>
 #include <atomic>
-#include <bit>
 #include <utility>
 
 namespace canopy {
@@ -77,51 +76,27 @@ std::vector<uint32_t> radix_sort(std::vector<uint64_t>& codes) {
     return order;
 }
 
-// Karras 2012, sec. 4: inner node i covers a range of sorted leaves, one end of which is i; its split is
-// where the common prefix of the codes drops. Equal codes are told apart by their positions (sec. 4, last
-// paragraph), so every code is distinct.
-class KarrasHierarchy {
-public:
-    explicit KarrasHierarchy(const std::vector<uint64_t>& codes) : codes_(codes), n_(int64_t(codes.size())) {}
-
-    struct Inner {
-        uint32_t left, right;  // child ids: below n - 1 an inner node, else leaf (id - (n - 1))
-    };
-
-    Inner node(int64_t i) const {
-        const int d = delta(i, i + 1) > delta(i, i - 1) ? 1 : -1;
-        const int delta_min = delta(i, i - d);
-        int64_t l_max = 2;
-        while (delta(i, i + l_max * d) > delta_min) l_max *= 2;
-        int64_t l = 0;
-        for (int64_t t = l_max / 2; t >= 1; t /= 2)
-            if (delta(i, i + (l + t) * d) > delta_min) l += t;
-        const int64_t j = i + l * d;
-        const int delta_node = delta(i, j);
-        int64_t s = 0;
-        for (int64_t t = (l + 1) / 2;; t = (t + 1) / 2) {
-            if (delta(i, i + (s + t) * d) > delta_node) s += t;
-            if (t == 1) break;
-        }
-        const int64_t gamma = i + s * d + std::min(d, 0);
-        const uint32_t inner = uint32_t(n_ - 1);
-        return {std::min(i, j) == gamma ? inner + uint32_t(gamma) : uint32_t(gamma),
-                std::max(i, j) == gamma + 1 ? inner + uint32_t(gamma + 1) : uint32_t(gamma + 1)};
+// Dissimilarity of sorted neighbours i and i + 1: the XOR of their codes, then (for equal codes, which Karras
+// 2012, sec. 4 tells apart by position) the XOR of their positions. Lexicographic order on the pair ranks
+// splits as the binary radix tree does, by the highest differing bit of the position-augmented codes.
+struct Dissimilarity {
+    explicit Dissimilarity(const std::vector<uint64_t>& codes) : codes_(codes) {}
+    bool less(uint32_t i, uint32_t j) const {
+        const uint64_t a = codes_[i] ^ codes_[i + 1], b = codes_[j] ^ codes_[j + 1];
+        return a != b ? a < b : (i ^ (i + 1)) < (j ^ (j + 1));
     }
-
-private:
-    int delta(int64_t i, int64_t j) const {
-        if (j < 0 || j >= n_) return -1;
-        const uint64_t x = codes_[size_t(i)] ^ codes_[size_t(j)];
-        return x ? std::countl_zero(x) : 64 + std::countl_zero(uint64_t(i ^ j));
-    }
-
     const std::vector<uint64_t>& codes_;
-    const int64_t n_;
 };
 
 }  // namespace
 
+// The binary radix tree over the sorted codes (Karras 2012, sec. 3 and 4), built bottom-up in one pass with its
+// bounds as Apetrei 2014 ("Fast and Simple Agglomerative LBVH Construction", sec. 3) does: each leaf climbs;
+// a node over sorted leaves [l, r] is the left child of the split between r and r + 1 or the right child of
+// the split between l - 1 and l, whichever neighbour is less dissimilar. The first child to reach a split
+// leaves its range end there and stops; the second completes the parent. Inner node k (the split between
+// leaves k and k + 1) keeps its children at slots 2k + 1 and 2k + 2, so every slot is used once, siblings are
+// adjacent, and Morton order keeps neighbouring nodes near each other; the root goes to slot 0.
 Bvh build_lbvh(BuildInput&& input, const BuildSettings&) {
     const std::vector<PrimRef>& refs = input.refs;
     const uint32_t n = uint32_t(refs.size());
@@ -130,41 +105,23 @@ Bvh build_lbvh(BuildInput&& input, const BuildSettings&) {
     std::vector<uint64_t> codes = morton_codes(refs);
     const std::vector<uint32_t> order = radix_sort(codes);
     bvh.refs.resize(n);
-    parallel::for_each(n, kGrain, [&](size_t i) { bvh.refs[i] = refs[order[i]].prim; });
-    if (n == 1) {
-        bvh.nodes = {{refs[0].bounds(), 0, 1}};
-        return bvh;
-    }
-    // Topology in Karras's numbering: inner nodes 0 .. n - 2 (0 is the root), leaves n - 1 .. 2n - 2.
-    const KarrasHierarchy hierarchy(codes);
-    std::vector<KarrasHierarchy::Inner> inner(n - 1);
-    std::vector<uint32_t> parent(2 * n - 1);
-    parallel::for_each(n - 1, kGrain, [&](size_t i) {
-        inner[i] = hierarchy.node(int64_t(i));
-        parent[inner[i].left] = parent[inner[i].right] = uint32_t(i);
-    });
-    // Bounds bottom-up: the second child to arrive at a node computes it (Karras 2012, sec. 4).
-    std::vector<BBox> bounds(2 * n - 1);
-    std::vector<std::atomic<uint8_t>> arrived(n - 1);
-    parallel::for_each(n, kGrain, [&](size_t leaf) {
-        uint32_t id = n - 1 + uint32_t(leaf);
-        bounds[id] = refs[order[leaf]].bounds();
-        while (id != 0) {
-            id = parent[id];
-            if (arrived[id].fetch_add(1, std::memory_order_acq_rel) == 0) return;
-            bounds[id] = merge(bounds[inner[id].left], bounds[inner[id].right]);
-        }
-    });
-    // Into canopy's layout: inner node i's two children go to slots 2i + 1 and 2i + 2, so siblings are adjacent
-    // and every slot is used; Morton order keeps neighbouring nodes near each other.
     bvh.nodes.resize(2 * size_t(n) - 1);
-    bvh.nodes[0] = {bounds[0], 1, 0};
-    parallel::for_each(n - 1, kGrain, [&](size_t i) {
-        const uint32_t children[2] = {inner[i].left, inner[i].right};
-        for (uint32_t c = 0; c < 2; ++c) {
-            const uint32_t id = children[c];
-            bvh.nodes[2 * i + 1 + c] = id >= n - 1 ? BvhNode{bounds[id], id - (n - 1), 1} : BvhNode{bounds[id], 2 * id + 1, 0};
+    const Dissimilarity dissimilarity(codes);
+    std::vector<std::atomic<uint32_t>> other_end(n - 1);  // 0 until a child arrives, then its range end + 1
+    parallel::for_each(n, kGrain, [&](size_t leaf) {
+        const PrimRef& ref = refs[order[leaf]];
+        bvh.refs[leaf] = ref.prim;
+        BvhNode node{ref.bounds(), uint32_t(leaf), 1};
+        for (uint32_t l = uint32_t(leaf), r = uint32_t(leaf); l != 0 || r != n - 1;) {
+            const bool left_child = l == 0 || (r != n - 1 && dissimilarity.less(r, l - 1));
+            const uint32_t parent = left_child ? r : l - 1;
+            bvh.nodes[2 * parent + (left_child ? 1 : 2)] = node;
+            const uint32_t sibling_end = other_end[parent].exchange((left_child ? l : r) + 1, std::memory_order_acq_rel);
+            if (sibling_end == 0) return;
+            (left_child ? r : l) = sibling_end - 1;
+            node = {merge(bvh.nodes[2 * parent + 1].bounds, bvh.nodes[2 * parent + 2].bounds), 2 * parent + 1, 0};
         }
+        bvh.nodes[0] = node;
     });
     return bvh;
 }
