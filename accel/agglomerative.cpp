@@ -15,12 +15,12 @@ constexpr size_t kGrain = 1024;
 constexpr uint32_t kNone = 0xffffffffu;
 constexpr uint32_t kSeeds = 8;  // slots either side tried before the tree search
 
-// d(A, B) of Walter et al. 2008, sec. 4: the surface area (here the half area) of the box around both.
+// Walter et al.'s distance for BVH clusters: the surface area (here the half area) of the box around both.
 float distance(const BBox& a, const BBox& b) { return merge(a, b).half_area(); }
 
 // A lower bound of d(A, B) over every B whose centre lies in `centres`: the merged box holds A and B's
 // centre, so at least A grown to the point of `centres` nearest to it. Bounding centres rather than boxes
-// (as Walter et al. bound cluster positions in their kd-tree) keeps a few large triangles from making the
+// (a tree over cluster positions, like Walter et al.'s kd-tree) keeps a few large triangles from making the
 // bound useless across the whole scene.
 float distance_bound(const BBox& a, const BBox& centres) {
     BBox grown = a;
@@ -29,10 +29,11 @@ float distance_bound(const BBox& a, const BBox& centres) {
     return grown.half_area();
 }
 
-// The auxiliary tree of the nearest-neighbour search (the role of Walter's kd-tree, sec. 3.1): a complete
-// binary tree over slots in Morton order of the initial clusters, each node the box of the centres of the
-// live clusters below it (leaves keep the cluster's box as well, for the exact distance). A merged cluster takes its first part's slot, the second part's slot empties, and both paths
-// to the root are refit, so boxes stay exact as clusters grow and disappear.
+// The auxiliary tree of the nearest-neighbour search (the role of Walter et al.'s kd-tree): a complete binary
+// tree over slots in Morton order of the initial clusters, each node the box of the centres of the live
+// clusters below it (a slot keeps its cluster's box as well, for the exact distance). A merged cluster takes
+// its first part's slot, the second part's slot empties, and both paths to the root are refit, so the boxes
+// stay exact as clusters grow and disappear.
 class SlotTree {
 public:
     explicit SlotTree(uint32_t slots)
@@ -120,7 +121,8 @@ public:
         std::vector<Candidate> initial(n_);
         parallel::for_each(n_, kGrain, [&](size_t s) { initial[s] = nearest(cluster_at_[s]); });
         std::priority_queue<Candidate, std::vector<Candidate>, std::greater<>> heap(std::greater<>{}, std::move(initial));
-        // Sec. 3: the smallest entry whose two clusters are both live is the closest pair of all.
+        // Walter et al.'s heap-based greedy clustering: the smallest entry whose two clusters are both live is the
+        // closest pair of all, since every other entry is exact or a lower bound.
         for (uint32_t live = n_; live > 1;) {
             const Candidate c = heap.top();
             heap.pop();

@@ -25,7 +25,7 @@ struct Dissimilarity {
 }  // namespace
 
 // The binary radix tree over the sorted codes (Karras 2012, sec. 3 and 4), built bottom-up in one pass with its
-// bounds as Apetrei 2014 ("Fast and Simple Agglomerative LBVH Construction", sec. 3) does: each leaf climbs;
+// bounds as Apetrei 2014 ("Fast and Simple Agglomerative LBVH Construction") does: each leaf climbs;
 // a node over sorted leaves [l, r] is the left child of the split between r and r + 1 or the right child of
 // the split between l - 1 and l, whichever neighbour is less dissimilar. The first child to reach a split
 // leaves its range end there and stops; the second completes the parent. Inner node k (the split between

@@ -51,7 +51,7 @@ public:
     }
 
 private:
-    // One iteration of sec. 3: nearest neighbours, merging of mutual pairs, compaction.
+    // One iteration of PLOC: nearest neighbours, merging of mutual pairs, compaction.
     void step() {
         const size_t m = clusters_.size();
         neighbour_.resize(m);
