@@ -7,6 +7,7 @@
 #include <cstddef>
 #include <cstdlib>
 #include <new>
+#include <type_traits>
 
 namespace canopy {
 
@@ -32,6 +33,13 @@ struct HugePageAllocator {
         return static_cast<T*>(p);
     }
     void deallocate(T* p, size_t) { std::free(p); }
+
+    // Default-initialises, so resize() leaves the plain node and leaf types unwritten: the parallel code that
+    // fills them touches their pages first, instead of one thread zeroing them all beforehand.
+    template <class U>
+    void construct(U* p) noexcept(std::is_nothrow_default_constructible_v<U>) {
+        ::new (static_cast<void*>(p)) U;
+    }
 
     template <class U>
     bool operator==(const HugePageAllocator<U>&) const { return true; }

@@ -1,6 +1,9 @@
 #include "accel/builder.h"
+#include "accel/agglomerative.h"
 #include "accel/binned_sah.h"
 #include "accel/lbvh.h"
+#include "accel/lbvh_sah.h"
+#include "accel/ploc.h"
 #include "accel/sweep_sah.h"
 
 #include <stdexcept>
@@ -9,8 +12,13 @@ namespace canopy {
 
 const std::vector<BuilderEntry>& builders() {
     static const std::vector<BuilderEntry> registry = {
+        {"agglo", "agglomerative clustering (Walter et al. 2008): closest pair by merged box area; one triangle per leaf",
+         &build_agglomerative},
         {"binned", "parallel binned SAH (Wald 2007), leaves by SAH termination", &build_binned_sah},
         {"lbvh", "linear BVH: Morton codes, radix sort, Karras 2012 hierarchy; one triangle per leaf", &build_lbvh},
+        {"lbvh-sah", "LBVH with leaves collapsed bottom-up where SAH prefers a leaf", &build_lbvh_sah},
+        {"ploc", "parallel locally-ordered clustering (Meister and Bittner 2018), radius 16; one triangle per leaf",
+         static_cast<BuildFunction>(&build_ploc)},
         {"sweep", "full sweep SAH (MacDonald and Booth 1990), leaves by SAH termination", &build_sweep_sah},
     };
     return registry;

@@ -1,0 +1,87 @@
+#include "accel/morton.h"
+
+#include "accel/parallel.h"
+
+#include <array>
+#include <utility>
+
+namespace canopy {
+namespace {
+
+constexpr size_t kGrain = 16 * 1024;
+
+// Spreads the low 21 bits of x to every third bit of a 63-bit code.
+uint64_t spread_bits(uint64_t x) {
+    x &= 0x1fffff;
+    x = (x | x << 32) & 0x001f00000000ffffull;
+    x = (x | x << 16) & 0x001f0000ff0000ffull;
+    x = (x | x << 8) & 0x100f00f00f00f00full;
+    x = (x | x << 4) & 0x10c30c30c30c30c3ull;
+    x = (x | x << 2) & 0x1249249249249249ull;
+    return x;
+}
+
+std::vector<uint64_t> morton_codes(const std::vector<PrimRef>& refs) {
+    const BBox centroids = parallel::reduce(
+        refs.size(), kGrain, BBox{},
+        [&](size_t begin, size_t end) {
+            BBox b;
+            for (size_t i = begin; i < end; ++i) b.extend(refs[i].center2());
+            return b;
+        },
+        [](BBox a, const BBox& b) { return merge(a, b); });
+    const Vec3 extent = centroids.extent();
+    Vec3 scale;
+    for (int a = 0; a < 3; ++a) scale[a] = extent[a] > 0 ? float((1u << 21) - 1) / extent[a] : 0.0f;
+    std::vector<uint64_t> codes(refs.size());
+    parallel::for_each(refs.size(), kGrain, [&](size_t i) {
+        const Vec3 q = (refs[i].center2() - centroids.lower) * scale;
+        codes[i] = spread_bits(uint64_t(q.x)) << 2 | spread_bits(uint64_t(q.y)) << 1 | spread_bits(uint64_t(q.z));
+    });
+    return codes;
+}
+
+// Least-significant-digit radix sort of (code, index) pairs, 11 bits a pass (six passes cover 63 bits), each
+// pass a parallel histogram, a prefix sum per chunk and a parallel stable scatter. Returns the indices in
+// code order; stable, so equal codes keep index order and the result does not depend on threads.
+std::vector<uint32_t> radix_sort(std::vector<uint64_t>& codes) {
+    const size_t n = codes.size();
+    const size_t chunks = std::max<size_t>(1, std::min<size_t>(64, n / kGrain));
+    std::vector<uint32_t> order(n), next_order(n);
+    std::vector<uint64_t> next_codes(n);
+    for (uint32_t i = 0; i < n; ++i) order[i] = i;
+    auto chunk_begin = [&](size_t c) { return n * c / chunks; };
+    constexpr int kBits = 11;
+    constexpr uint64_t kDigits = uint64_t(1) << kBits;
+    for (int shift = 0; shift < 63; shift += kBits) {
+        std::vector<std::array<uint32_t, kDigits>> counts(chunks);
+        parallel::for_each(chunks, 1, [&](size_t c) {
+            counts[c].fill(0);
+            for (size_t i = chunk_begin(c); i < chunk_begin(c + 1); ++i) ++counts[c][(codes[i] >> shift) & (kDigits - 1)];
+        });
+        uint32_t offset = 0;
+        for (uint64_t digit = 0; digit < kDigits; ++digit)
+            for (size_t c = 0; c < chunks; ++c) offset += std::exchange(counts[c][digit], offset);
+        parallel::for_each(chunks, 1, [&](size_t c) {
+            for (size_t i = chunk_begin(c); i < chunk_begin(c + 1); ++i) {
+                const uint32_t at = counts[c][(codes[i] >> shift) & (kDigits - 1)]++;
+                next_codes[at] = codes[i];
+                next_order[at] = order[i];
+            }
+        });
+        codes.swap(next_codes);
+        order.swap(next_order);
+    }
+    return order;
+}
+
+}  // namespace
+
+MortonOrder sort_by_morton_code(const std::vector<PrimRef>& refs) {
+    MortonOrder sorted;
+    sorted.codes = morton_codes(refs);
+    sorted.order = radix_sort(sorted.codes);
+    return sorted;
+}
+
+}  // namespace canopy
