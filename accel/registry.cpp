@@ -1,7 +1,10 @@
 #include "accel/builder.h"
 #include "accel/binned_sah.h"
+#include "accel/bittner_reinsertion.h"
 #include "accel/lbvh.h"
 #include "accel/sweep_sah.h"
+#include "accel/tree_rotations.h"
+#include "accel/treelet_restructuring.h"
 
 #include <stdexcept>
 
@@ -12,6 +15,10 @@ const std::vector<BuilderEntry>& builders() {
         {"binned", "parallel binned SAH (Wald 2007), leaves by SAH termination", &build_binned_sah},
         {"lbvh", "linear BVH: Morton codes, radix sort, Karras 2012 hierarchy; one triangle per leaf", &build_lbvh},
         {"sweep", "full sweep SAH (MacDonald and Booth 1990), leaves by SAH termination", &build_sweep_sah},
+        {"bittner", "optimiser: removal and reinsertion of inefficient nodes (Bittner et al. 2013)", &build_bittner, "lbvh"},
+        {"hillclimb", "optimiser: tree rotations by hill climbing (Kensler 2008)", &build_hillclimb, "lbvh"},
+        {"anneal", "optimiser: tree rotations by simulated annealing (Kensler 2008)", &build_anneal, "lbvh"},
+        {"treelet", "optimiser: optimal treelet restructuring, 3 rounds (Karras and Aila 2013)", &build_treelet, "lbvh"},
     };
     return registry;
 }
