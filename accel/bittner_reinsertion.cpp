@@ -9,10 +9,10 @@
 namespace canopy {
 namespace {
 
-constexpr double kBatchShare = 0.01;         // inner nodes removed per batch
+constexpr double kBatchShare = 0.1;          // inner nodes removed per batch
 constexpr uint32_t kWindow = 3;              // batches over which the SAH must fall by kMinImprovement
 constexpr double kMinImprovement = 0.01;
-constexpr uint32_t kMaxBatches = 150;        // caps the work at 1.5 removals per inner node
+constexpr uint32_t kMaxBatches = 30;         // caps the work at 3 removals per inner node
 
 class Reinsertion {
 public:
@@ -35,7 +35,7 @@ public:
     }
 
 private:
-    // Sec. 4.1: a node is inefficient when its box is large and much larger than its children's.
+    // The paper's combined measure: a node is inefficient when its box is large and much larger than its children's.
     double inefficiency(uint32_t n) const {
         const double area = tree_.area(n);
         const double a = tree_.area(tree_[n].child[0]), b = tree_.area(tree_[n].child[1]);
@@ -81,7 +81,7 @@ private:
         tree_.refit_to_root(new_parent);
     }
 
-    // Sec. 4.2: placing the box beside x costs the new parent's area plus the growth of x's ancestors (the
+    // The paper's search: placing the box beside x costs the new parent's area plus the growth of x's ancestors (the
     // induced cost); a subtree is searched only while its lower bound, induced cost + growth of x + the box's own
     // area, beats the best placement found.
     uint32_t best_sibling(const BBox& box) {

@@ -52,6 +52,26 @@ void MutableTree::refit_to_root(uint32_t n) {
     for (; n != kNoNode; n = nodes[n].parent) refit(n);
 }
 
+void MutableTree::relayout() {
+    if (nodes.empty()) return;
+    std::vector<MutableNode> laid_out;
+    laid_out.reserve(nodes.size());
+    struct Pending { uint32_t old, parent, slot_in_parent; };
+    std::vector<Pending> stack{{root, kNoNode, 0}};
+    while (!stack.empty()) {
+        const Pending p = stack.back();
+        stack.pop_back();
+        const uint32_t slot = uint32_t(laid_out.size());
+        laid_out.push_back(nodes[p.old]);
+        laid_out.back().parent = p.parent;
+        if (p.parent != kNoNode) laid_out[p.parent].child[p.slot_in_parent] = slot;
+        if (!nodes[p.old].is_leaf())
+            for (uint32_t c = 2; c-- > 0;) stack.push_back({nodes[p.old].child[c], slot, c});
+    }
+    nodes = std::move(laid_out);
+    root = 0;
+}
+
 std::vector<uint32_t> MutableTree::breadth_first() const {
     std::vector<uint32_t> order;
     if (nodes.empty()) return order;

@@ -46,6 +46,9 @@ struct MutableTree {
     void refit(uint32_t n);
     void refit_to_root(uint32_t n);
 
+    // Renumbers the nodes in depth-first order, so that subtrees that moved sit together in memory again.
+    void relayout();
+
     // Nodes in breadth-first order from the root: reversed, every child comes before its parent.
     std::vector<uint32_t> breadth_first() const;
     // Sum of inner half areas: the only part of eq. 1 that moving whole leaves around changes.
@@ -54,7 +57,7 @@ struct MutableTree {
     double unnormalised_sah(const BuildSettings& settings) const;
 
     // The dense Bvh: a subtree becomes one leaf where that is no more expensive by eq. 1 (as Karras and Aila
-    // 2013, sec. 4.3, collapse after optimising) and it holds at most settings.max_leaf_size refs. A subtree that
+    // 2013 collapse after optimising) and it holds at most settings.max_leaf_size refs. A subtree that
     // would reach past kMaxBvhDepth is rebuilt below kMedianFallbackDepth by median cuts over its leaves.
     Bvh to_bvh(const BuildSettings& settings) const;
 };

@@ -13,11 +13,12 @@ constexpr float kMinRelativeGain = 1e-6f;      // a rotation must gain this shar
 // Annealing schedule (ours; Kensler gives none we could reuse unchanged): temperatures fall linearly from
 // kStartTemperature to 0 over kAnnealPasses passes. Deltas are measured relative to the node's own area, so one
 // temperature suits every level of the tree.
-constexpr uint32_t kAnnealPasses = 48;
-constexpr float kStartTemperature = 0.05f;
+constexpr uint32_t kAnnealPasses = 96;
+constexpr float kStartTemperature = 0.02f;
+constexpr uint32_t kPassesPerRelayout = 8;  // rotations scatter subtrees in memory: lay them out again
 constexpr uint64_t kAnnealSeed = 0x6b656e736c6572ull;
 
-// Swapping subtrees a and b changes the sum of inner areas by delta (their new parents' areas, sec. 2 of
+// Swapping subtrees a and b changes the sum of inner areas by delta (their new parents' areas; as in
 // Kensler: the node's own box stays the same).
 struct Rotation {
     uint32_t a, b;
@@ -95,12 +96,14 @@ void anneal_pass(MutableTree& tree, float temperature, uint64_t pass_key) {
 }  // namespace
 
 void hill_climb(MutableTree& tree) {
+    tree.relayout();
     for (uint32_t pass = 0; pass < kMaxHillClimbPasses && hill_climb_pass(tree) > 0; ++pass) {}
 }
 
 void anneal(MutableTree& tree, uint64_t seed) {
     for (uint32_t pass = 0; pass < kAnnealPasses; ++pass) {
         const float temperature = kStartTemperature * float(kAnnealPasses - pass) / float(kAnnealPasses);
+        if (pass % kPassesPerRelayout == 0) tree.relayout();
         anneal_pass(tree, temperature, mix(seed + pass));
     }
     hill_climb(tree);
@@ -114,10 +117,11 @@ Bvh build_hillclimb(BuildInput&& input, const BuildSettings& settings) {
 
 Bvh build_anneal(BuildInput&& input, const BuildSettings& settings) {
     MutableTree tree(build_start_tree(std::move(input), settings, "lbvh"));
-    MutableTree climbed = tree;
+    MutableTree start = tree;
     anneal(tree, kAnnealSeed);
-    hill_climb(climbed);
-    return (tree.inner_area() <= climbed.inner_area() ? tree : climbed).to_bvh(settings);
+    if (tree.inner_area() <= start.inner_area()) return tree.to_bvh(settings);
+    hill_climb(start);  // annealing ended above the start: never return a worse tree than hill climbing
+    return start.to_bvh(settings);
 }
 
 }  // namespace canopy

@@ -40,7 +40,7 @@ private:
         uint32_t leaf_count = 0;
     };
 
-    // Eq. 1 over the subtree, unnormalised, with the collapse into one leaf where that is cheaper (sec. 4.3).
+    // Eq. 1 over the subtree, unnormalised, with the collapse into one leaf where that is cheaper (as the paper).
     double subtree_cost(uint32_t n) const {
         const MutableNode& node = tree_[n];
         if (node.is_leaf()) return leaf_cost(tree_.area(n), node.ref_count);
@@ -54,7 +54,7 @@ private:
         return refs <= settings_.max_leaf_size ? leaf_cost(area, refs) : std::numeric_limits<double>::infinity();
     }
 
-    // Sec. 4.1: grow from the root's children, always expanding the treelet leaf with the largest area.
+    // Sec. 4: grow from the root's children, always expanding the treelet leaf with the largest area.
     Treelet form_treelet(uint32_t root) const {
         Treelet t;
         t.inner[0] = root;
