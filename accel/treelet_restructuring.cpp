@@ -19,13 +19,13 @@ constexpr double kMinRelativeGain = 1e-9;         // rebuild only on a real impr
 class TreeletOptimiser {
 public:
     TreeletOptimiser(MutableTree& tree, const BuildSettings& settings)
-        : tree_(tree), settings_(settings), cost_(tree.nodes.size()) {
-        const std::vector<uint32_t> order = tree_.breadth_first();
-        for (auto it = order.rbegin(); it != order.rend(); ++it) cost_[*it] = subtree_cost(*it);
-    }
+        : tree_(tree), settings_(settings), cost_(tree.nodes.size()) {}
 
     void optimise() {
         for (uint32_t round = 0, gamma = kFirstGamma; round < kRounds; ++round, gamma *= 2) {
+            tree_.relayout();  // restructuring scatters subtrees in memory: lay them out again
+            const std::vector<uint32_t> order = tree_.breadth_first();
+            for (auto it = order.rbegin(); it != order.rend(); ++it) cost_[*it] = subtree_cost(*it);
             visit_inner_post_order(tree_, [&](uint32_t n) {
                 cost_[n] = subtree_cost(n);
                 if (tree_[n].triangles >= gamma) restructure(n);
