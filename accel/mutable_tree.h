@@ -62,12 +62,6 @@ struct MutableTree {
     Bvh to_bvh(const BuildSettings& settings) const;
 };
 
-// Visits every inner node after both its children (post order). Subtrees with at least `grain` triangles run
-// concurrently; `visit(n)` may restructure n's subtree but nothing outside it, so the result does not depend on
-// the number of threads.
-template <class Visit>
-void visit_inner_post_order(MutableTree& tree, Visit&& visit, uint32_t grain);
-
 namespace detail {
 
 constexpr uint32_t kMaxForkDepth = 48;  // deeper subtrees run serially: bounds the recursion
@@ -102,6 +96,9 @@ void visit_post_order(MutableTree& tree, uint32_t n, Visit& visit, uint32_t grai
 
 }  // namespace detail
 
+// Visits every inner node after both its children (post order). Subtrees with at least `grain` triangles run
+// concurrently; `visit(n)` may restructure n's subtree but nothing outside it, so the result does not depend on
+// the number of threads.
 template <class Visit>
 void visit_inner_post_order(MutableTree& tree, Visit&& visit, uint32_t grain) {
     if (!tree.nodes.empty()) detail::visit_post_order(tree, tree.root, visit, grain, 0);

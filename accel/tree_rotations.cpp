@@ -10,9 +10,9 @@ namespace {
 constexpr uint32_t kParallelGrain = 4 * 1024;  // triangles under a subtree worth a task
 constexpr uint32_t kMaxHillClimbPasses = 200;  // caps the work; passes stop far earlier in practice
 constexpr float kMinRelativeGain = 1e-6f;      // a rotation must gain this share of the node's area: no cycling
-// Annealing schedule (ours; Kensler gives none we could reuse unchanged): temperatures fall linearly from
-// kStartTemperature to 0 over kAnnealPasses passes. Deltas are measured relative to the node's own area, so one
-// temperature suits every level of the tree.
+// Annealing schedule, our choice tuned on sponza: temperatures fall linearly from kStartTemperature to 0 over
+// kAnnealPasses passes. Deltas are measured relative to the node's own area, so one temperature suits every
+// level of the tree.
 constexpr uint32_t kAnnealPasses = 96;
 constexpr float kStartTemperature = 0.02f;
 constexpr uint32_t kPassesPerRelayout = 8;  // rotations scatter subtrees in memory: lay them out again
