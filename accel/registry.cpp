@@ -1,10 +1,13 @@
 #include "accel/builder.h"
 #include "accel/agglomerative.h"
 #include "accel/binned_sah.h"
+#include "accel/bittner_reinsertion.h"
 #include "accel/lbvh.h"
 #include "accel/lbvh_sah.h"
 #include "accel/ploc.h"
 #include "accel/sweep_sah.h"
+#include "accel/tree_rotations.h"
+#include "accel/treelet_restructuring.h"
 
 #include <stdexcept>
 
@@ -20,6 +23,10 @@ const std::vector<BuilderEntry>& builders() {
         {"ploc", "parallel locally-ordered clustering (Meister and Bittner 2018), radius 16; one triangle per leaf",
          static_cast<BuildFunction>(&build_ploc)},
         {"sweep", "full sweep SAH (MacDonald and Booth 1990), leaves by SAH termination", &build_sweep_sah},
+        {"bittner", "optimiser: removal and reinsertion of inefficient nodes (Bittner et al. 2013)", &build_bittner, "lbvh"},
+        {"hillclimb", "optimiser: tree rotations by hill climbing (Kensler 2008)", &build_hillclimb, "lbvh"},
+        {"anneal", "optimiser: tree rotations by simulated annealing (Kensler 2008)", &build_anneal, "lbvh"},
+        {"treelet", "optimiser: optimal treelet restructuring, 3 rounds (Karras and Aila 2013)", &build_treelet, "lbvh"},
     };
     return registry;
 }
