@@ -72,5 +72,8 @@ TwoLevelInput two_level_input(const Scene& scene);
 
 // quality: "low", "medium" or "high". threads: 0 for all. Throws std::invalid_argument for another quality.
 std::unique_ptr<Accelerator> make_embree_accelerator(const FlatScene& scene, const std::string& quality, int threads);
+// Embree's two-level BVH: a scene per object (OBJ group), instanced by a top scene, as Embree builds instances.
+std::unique_ptr<Accelerator> make_embree_two_level_accelerator(const Scene& scene, const FlatScene& flat,
+                                                               const std::string& quality, int threads);
 
 }  // namespace canopy

@@ -62,8 +62,11 @@ std::vector<Entry> make_entries(const Scene& scene, const FlatScene& flat, const
                             scene, flat, {builder, optimiser_start(builder, o.start), kernel, traversal == "robust",
                                           intersector == "watertight", toplevel, o.frames_planned,
                                           uint64_t(o.width) * uint64_t(o.height)})});
-    for (const std::string& quality : o.embree_qualities)
+    const bool two_level = std::any_of(o.toplevels.begin(), o.toplevels.end(), [](const std::string& t) { return t != "flat"; });
+    for (const std::string& quality : o.embree_qualities) {
         entries.push_back({make_embree_accelerator(flat, quality, o.threads)});
+        if (two_level) entries.push_back({make_embree_two_level_accelerator(scene, flat, quality, o.threads)});
+    }
     return entries;
 }
 

@@ -4,6 +4,8 @@
 
 #include <embree3/rtcore.h>
 
+#include <tbb/parallel_for.h>
+
 #include <atomic>
 #include <cstring>
 #include <stdexcept>
@@ -20,6 +22,7 @@ RTCBuildQuality parse_quality(const std::string& quality) {
 
 struct EmbreeTracer {
     RTCScene scene;
+    const uint32_t* prim_offsets = nullptr;  // two-level: per instance, its first scene-wide triangle id
     bool closest(const Ray& ray, Hit& hit) const {
         RTCIntersectContext context;
         rtcInitIntersectContext(&context);
@@ -33,16 +36,19 @@ struct EmbreeTracer {
         rh.ray.id = 0;
         rh.ray.flags = 0;
         rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+        rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
         rtcIntersect1(scene, &context, &rh);
         if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return false;
-        hit = {rh.ray.tfar, rh.hit.u, rh.hit.v, rh.hit.primID};
+        const uint32_t offset = prim_offsets && rh.hit.instID[0] != RTC_INVALID_GEOMETRY_ID ? prim_offsets[rh.hit.instID[0]] : 0;
+        hit = {rh.ray.tfar, rh.hit.u, rh.hit.v, offset + rh.hit.primID};
         return true;
     }
 };
 
 class EmbreeAccelerator final : public Accelerator {
 public:
-    EmbreeAccelerator(const FlatScene& scene, const std::string& quality, int threads)
+    // `objects` non-null: Embree's two-level BVH, a scene per object under a scene of instances.
+    EmbreeAccelerator(const FlatScene& scene, const std::string& quality, int threads, const TwoLevelInput* objects)
         : quality_name_(quality), quality_(parse_quality(quality)) {
         const std::string config = threads > 0 ? "threads=" + std::to_string(threads) : "";
         device_ = rtcNewDevice(config.c_str());
@@ -54,21 +60,28 @@ public:
         indices_.resize(scene.triangles.size() * 3);
         for (uint32_t i = 0; i < indices_.size(); ++i) indices_[i] = i;
         triangle_count_ = scene.triangles.size();
+        if (objects) {
+            objects_ = *objects;
+            for (TwoLevelInstance& i : objects_->instances) prim_offsets_.push_back(i.prim_offset);
+            for (std::vector<Triangle>& tris : objects_->objects) tris.reserve(tris.size() + 1);  // Embree's padding
+        }
     }
 
     ~EmbreeAccelerator() override {
         if (scene_) rtcReleaseScene(scene_);
+        release_object_scenes();
         if (device_) rtcReleaseDevice(device_);
     }
 
     std::string library() const override { return "embree"; }
     std::string builder() const override { return ""; }
     std::string kernel() const override { return "embree"; }
-    std::string quality() const override { return quality_name_; }
+    std::string quality() const override { return quality_name_ + (objects_ ? " two-level" : ""); }
 
     // A new scene with a new geometry over the shared buffers, so the commit is a full build.
     void prepare() override {
         if (scene_) rtcReleaseScene(scene_);
+        if (objects_) return prepare_two_level();
         scene_ = rtcNewScene(device_);
         rtcSetSceneBuildQuality(scene_, quality_);
         RTCGeometry geometry = rtcNewGeometry(device_, RTC_GEOMETRY_TYPE_TRIANGLE);
@@ -84,18 +97,23 @@ public:
     }
 
     void build() override {
+        if (objects_) {
+            tbb::parallel_for(size_t(0), object_scenes_.size(), [&](size_t i) {
+                if (object_scenes_[i]) rtcCommitScene(object_scenes_[i]);
+            });
+        }
         rtcCommitScene(scene_);
         if (rtcGetDeviceError(device_) != RTC_ERROR_NONE) throw std::runtime_error("Embree: scene build failed");
     }
 
     uint64_t render(const ShadingScene& scene, const PinholeCamera& camera, uint32_t frame, Image& image,
                     const std::function<void(float)>& on_tile) const override {
-        return render_frame(EmbreeTracer{scene_}, scene, camera, frame, image, on_tile);
+        return render_frame(EmbreeTracer{scene_, offsets()}, scene, camera, frame, image, on_tile);
     }
 
     Hit trace(const Ray& ray) const override {
         Hit hit;
-        EmbreeTracer{scene_}.closest(ray, hit);
+        EmbreeTracer{scene_, offsets()}.closest(ray, hit);
         return hit;
     }
 
@@ -110,6 +128,50 @@ public:
     }
 
 private:
+    const uint32_t* offsets() const { return objects_ ? prim_offsets_.data() : nullptr; }
+
+    void release_object_scenes() {
+        for (RTCScene s : object_scenes_)
+            if (s) rtcReleaseScene(s);
+        object_scenes_.clear();
+    }
+
+    // New object scenes and a new top scene of instances, so that build() commits everything from scratch.
+    void prepare_two_level() {
+        release_object_scenes();
+        for (const std::vector<Triangle>& tris : objects_->objects) {
+            if (tris.empty()) {
+                object_scenes_.push_back(nullptr);
+                continue;
+            }
+            RTCScene object = rtcNewScene(device_);
+            rtcSetSceneBuildQuality(object, quality_);
+            RTCGeometry geometry = rtcNewGeometry(device_, RTC_GEOMETRY_TYPE_TRIANGLE);
+            rtcSetGeometryBuildQuality(geometry, quality_);
+            rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, tris.data(), 0,
+                                       3 * sizeof(float), tris.size() * 3);
+            rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, indices_.data(), 0,
+                                       3 * sizeof(uint32_t), tris.size());
+            rtcCommitGeometry(geometry);
+            rtcAttachGeometry(object, geometry);
+            rtcReleaseGeometry(geometry);
+            object_scenes_.push_back(object);
+        }
+        scene_ = rtcNewScene(device_);
+        rtcSetSceneBuildQuality(scene_, quality_);
+        for (uint32_t i = 0; i < objects_->instances.size(); ++i) {
+            const TwoLevelInstance& instance = objects_->instances[i];
+            if (!object_scenes_[instance.object]) continue;
+            RTCGeometry geometry = rtcNewGeometry(device_, RTC_GEOMETRY_TYPE_INSTANCE);
+            rtcSetGeometryInstancedScene(geometry, object_scenes_[instance.object]);
+            rtcSetGeometryTransform(geometry, 0, RTC_FORMAT_FLOAT4X4_COLUMN_MAJOR, &instance.to_world[0][0]);
+            rtcCommitGeometry(geometry);
+            rtcAttachGeometryByID(scene_, geometry, i);
+            rtcReleaseGeometry(geometry);
+        }
+        build_bytes_ = 0;
+    }
+
     static bool monitor(void* self, ssize_t bytes, bool) {
         static_cast<EmbreeAccelerator*>(self)->build_bytes_ += int64_t(bytes);
         return true;
@@ -123,12 +185,21 @@ private:
     std::vector<uint32_t> indices_;
     size_t triangle_count_ = 0;
     std::atomic<int64_t> build_bytes_{0};
+    std::optional<TwoLevelInput> objects_;
+    std::vector<uint32_t> prim_offsets_;
+    std::vector<RTCScene> object_scenes_;
 };
 
 }  // namespace
 
 std::unique_ptr<Accelerator> make_embree_accelerator(const FlatScene& scene, const std::string& quality, int threads) {
-    return std::make_unique<EmbreeAccelerator>(scene, quality, threads);
+    return std::make_unique<EmbreeAccelerator>(scene, quality, threads, nullptr);
+}
+
+std::unique_ptr<Accelerator> make_embree_two_level_accelerator(const Scene& scene, const FlatScene& flat,
+                                                               const std::string& quality, int threads) {
+    const TwoLevelInput objects = two_level_input(scene);
+    return std::make_unique<EmbreeAccelerator>(flat, quality, threads, &objects);
 }
 
 }  // namespace canopy
