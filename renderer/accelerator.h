@@ -33,6 +33,7 @@ public:
     // `--builder auto`: what it chose (builder, with "two-level/" in front when it chose that) and why.
     virtual std::string chosen() const { return ""; }
     virtual std::string reason() const { return ""; }
+    virtual int frames_planned() const { return 0; }
 
     // Untimed preparation for one build (canopy: PrimRef generation), then the timed build.
     virtual void prepare() = 0;

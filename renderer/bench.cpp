@@ -42,7 +42,8 @@ struct Entry {
     std::string label() const {
         if (accel->library() == "embree") return "embree " + accel->quality();
         const std::string chosen = accel->chosen();
-        return accel->builder() + (chosen.empty() ? "" : "(" + chosen + ")") + " " + accel->kernel();
+        const std::string planned = accel->frames_planned() ? "@" + std::to_string(accel->frames_planned()) : "";
+        return accel->builder() + planned + (chosen.empty() ? "" : "(" + chosen + ")") + " " + accel->kernel();
     }
 };
 
@@ -53,15 +54,25 @@ std::string optimiser_start(const std::string& builder, const std::string& start
 
 std::vector<Entry> make_entries(const Scene& scene, const FlatScene& flat, const BenchOptions& o) {
     std::vector<Entry> entries;
+    const uint64_t pixels = uint64_t(o.width) * uint64_t(o.height);
     for (const std::string& toplevel : o.toplevels)
         for (const std::string& builder : o.builders)
             for (const std::string& kernel : o.kernels)
                 for (const std::string& traversal : o.traversals)
-                    for (const std::string& intersector : o.intersectors)
-                        entries.push_back({make_canopy_accelerator(
-                            scene, flat, {builder, optimiser_start(builder, o.start), kernel, traversal == "robust",
-                                          intersector == "watertight", toplevel, o.frames_planned,
-                                          uint64_t(o.width) * uint64_t(o.height)})});
+                    for (const std::string& intersector : o.intersectors) {
+                        const CanopyOptions options{builder, optimiser_start(builder, o.start), kernel,
+                                                    traversal == "robust", intersector == "watertight", toplevel};
+                        if (builder != "auto") {
+                            entries.push_back({make_canopy_accelerator(scene, flat, options)});
+                            continue;
+                        }
+                        if (toplevel != o.toplevels.front()) continue;  // auto chooses the top level itself
+                        for (int frames : o.frames_planned) {
+                            CanopyOptions planned = options;
+                            planned.toplevel = "flat", planned.frames_planned = frames, planned.pixels = pixels;
+                            entries.push_back({make_canopy_accelerator(scene, flat, planned)});
+                        }
+                    }
     const bool two_level = std::any_of(o.toplevels.begin(), o.toplevels.end(), [](const std::string& t) { return t != "flat"; });
     for (const std::string& quality : o.embree_qualities) {
         entries.push_back({make_embree_accelerator(flat, quality, o.threads)});
@@ -124,6 +135,7 @@ nlohmann::json to_json(const std::vector<Entry>& entries, const BenchOptions& o,
                            {"kernel", canopy ? nlohmann::json(e.accel->kernel()) : nlohmann::json(nullptr)},
                            {"chosen", e.accel->chosen().empty() ? nlohmann::json(nullptr) : nlohmann::json(e.accel->chosen())},
                            {"reason", e.accel->reason().empty() ? nlohmann::json(nullptr) : nlohmann::json(e.accel->reason())},
+                           {"frames_planned", e.accel->frames_planned() ? nlohmann::json(e.accel->frames_planned()) : nlohmann::json(nullptr)},
                            {"quality", canopy ? nlohmann::json(nullptr) : nlohmann::json(e.accel->quality())},
                            {"build_ms_min", e.build_min()},
                            {"build_ms_median", median(e.build_ms)},

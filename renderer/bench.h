@@ -15,7 +15,7 @@ struct BenchOptions {
     std::vector<std::string> embree_qualities;  // empty: no Embree rows
     int builds = 20;
     int frames = 10;
-    int frames_planned = 16;  // what `--builder auto` plans its time to image for
+    std::vector<int> frames_planned{16};  // `--builder auto` rows: one per value, each planning for that many frames
     int threads = 0;
     int width = 1024, height = 768;
     int bounces = 8;

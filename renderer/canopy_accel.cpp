@@ -211,6 +211,7 @@ public:
     std::string quality() const override { return ""; }
     std::string chosen() const override { return chosen_ ? chosen_->builder() : ""; }
     std::string reason() const override { return choice_.reason; }
+    int frames_planned() const override { return options_.frames_planned; }
 
     void prepare() override {}
 

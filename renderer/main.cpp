@@ -129,8 +129,8 @@ int main(int argc, char** argv) {
     bench->add_option("--start", b.start, "Optimisers among the builders: builder of their start tree");
     bench->add_option("--toplevel", b.toplevels, "Top levels: flat, two-level (object BVHs under a BVH over instances), rebraid (Benthin 2017)")
         ->delimiter(',')->check(CLI::IsMember({"flat", "two-level", "rebraid"}))->capture_default_str();
-    bench->add_option("--frames-planned", b.frames_planned, "Frames that --builder auto plans time to image for")
-        ->check(CLI::Range(1, 1 << 24))->capture_default_str();
+    bench->add_option("--frames-planned", b.frames_planned, "Frames that --builder auto plans time to image for (a row each)")
+        ->delimiter(',')->check(CLI::Range(1, 1 << 24))->capture_default_str();
     bench->add_option("--kernel", b.kernels, "Kernels: auto (widest), bvh2, bvh4, bvh8")->delimiter(',')->capture_default_str();
     bench->add_option("--accel", accels, "Reference accelerators in the same run: embree")->delimiter(',')
         ->check(CLI::IsMember({"embree"}));

@@ -2,6 +2,7 @@
 #include "oracle.h"
 #include "renderer/accelerator.h"
 #include "renderer/bench.h"
+#include "renderer/auto_builder.h"
 #include "renderer/heatmap.h"
 
 #include <OpenImageIO/imageio.h>
@@ -255,4 +256,27 @@ TEST_CASE("heatmaps hold what the counting kernel reports per pixel", "[render][
     CHECK(std::filesystem::exists(std::filesystem::path(path).replace_extension(".png")));
     const auto embree = built(make_embree_accelerator(flat, "medium", 0));
     CHECK_THROWS_WITH(write_heatmap(*embree, camera, 40, 30, path), Catch::Contains("canopy kernel"));
+}
+
+TEST_CASE("auto chooses two-level only with instances and plans for the frames asked", "[auto]") {
+    SceneStatistics flat_scene;
+    flat_scene.triangles = flat_scene.unique_triangles = 262205;
+    const AutoChoice few = choose_builder(flat_scene, 1, 64 * 48), many = choose_builder(flat_scene, 256, 1024 * 768);
+    CHECK(few.toplevel == "flat");
+    CHECK(many.toplevel == "flat");
+    CHECK(few.reason.find("1 frames planned") != std::string::npos);
+    SceneStatistics zoo = flat_scene;
+    zoo.triangles = 64 * zoo.unique_triangles;
+    CHECK(choose_builder(zoo, 16, 1024 * 768).toplevel == "two-level");
+    // The choice is a registered builder, and the accelerator built with it reports it.
+    const Scene scene = load_scene("gen:box?tris=2000&seed=3");
+    const FlatScene flat = flatten(scene);
+    CanopyOptions options;
+    options.builder = "auto";
+    const auto accel = make_canopy_accelerator(scene, flat, options);
+    accel->prepare();
+    accel->build();
+    CHECK(accel->builder() == "auto");
+    CHECK_NOTHROW(find_builder(accel->chosen()));
+    CHECK_THROWS_WITH(make_canopy_accelerator(flat, options), Catch::Contains("auto"));
 }
