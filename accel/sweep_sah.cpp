@@ -6,6 +6,7 @@
 #include <tbb/parallel_sort.h>
 
 #include <array>
+#include <span>
 
 namespace canopy {
 namespace {
@@ -20,8 +21,9 @@ struct Split {
 
 class SweepSahBuilder {
 public:
-    SweepSahBuilder(const std::vector<PrimRef>& refs, const BuildSettings& settings)
+    SweepSahBuilder(std::span<const PrimRef> refs, const BuildSettings& settings, uint32_t median_depth)
         : refs_(refs), settings_(settings), max_leaf_(std::max<uint32_t>(settings.max_leaf_size, 1)),
+          median_depth_(median_depth),
           scratch_(refs.size()), right_area_(refs.size()), goes_left_(refs.size()), nodes_(refs.size()) {
         for (int axis = 0; axis < 3; ++axis) sort_by_centroid(axis);
     }
@@ -76,7 +78,7 @@ private:
         const uint32_t n = end - begin;
         if (n == 1) return nodes_.set_leaf(node, bounds, begin, n);
         Split split;
-        if (depth < kMedianFallbackDepth) {
+        if (depth < median_depth_) {
             split = best_split(begin, end);
             const float area = bounds.half_area();
             const float split_cost = settings_.costs.inner * area + settings_.costs.triangle * split.cost;
@@ -121,9 +123,10 @@ private:
         return b;
     }
 
-    const std::vector<PrimRef>& refs_;
+    std::span<const PrimRef> refs_;
     const BuildSettings& settings_;
     const uint32_t max_leaf_;
+    const uint32_t median_depth_;  // depth from which nodes are cut at the median
     std::array<std::vector<uint32_t>, 3> order_;
     std::vector<uint32_t> scratch_;    // by position: subtrees use disjoint ranges
     std::vector<float> right_area_;    // by position
@@ -135,7 +138,12 @@ private:
 
 Bvh build_sweep_sah(BuildInput&& input, const BuildSettings& settings) {
     if (input.refs.empty()) return {};
-    return SweepSahBuilder(input.refs, settings).build();
+    return SweepSahBuilder(input.refs, settings, kMedianFallbackDepth).build();
+}
+
+Bvh build_sweep_sah_subtree(std::span<const PrimRef> refs, const BuildSettings& settings, uint32_t median_depth) {
+    if (refs.empty()) return {};
+    return SweepSahBuilder(refs, settings, median_depth).build();
 }
 
 }  // namespace canopy
