@@ -2,6 +2,7 @@
 #include "accel/agglomerative.h"
 #include "accel/binned_sah.h"
 #include "accel/bittner_reinsertion.h"
+#include "accel/bonsai.h"
 #include "accel/lbvh.h"
 #include "accel/lbvh_sah.h"
 #include "accel/ploc.h"
@@ -27,6 +28,11 @@ const std::vector<BuilderEntry>& builders() {
         {"hillclimb", "optimiser: tree rotations by hill climbing (Kensler 2008)", &build_hillclimb, "lbvh"},
         {"anneal", "optimiser: tree rotations by simulated annealing (Kensler 2008)", &build_anneal, "lbvh"},
         {"treelet", "optimiser: optimal treelet restructuring, 3 rounds (Karras and Aila 2013)", &build_treelet, "lbvh"},
+        {"bonsai", "Bonsai (Ganestam et al. 2015): mid-point partitions, sweep SAH mini-trees, pruning, sweep SAH top tree",
+         &build_bonsai},
+        {"bonsai-split", "BONSAIS (Ganestam and Doggett 2016): Bonsai with SAH-guided split partitioning", &build_bonsai_split},
+        {"sweep-presplit", "SWEEPPRE (Ganestam and Doggett 2016): split partitioning as a pre-split pass, then sweep SAH",
+         &build_sweep_presplit},
     };
     return registry;
 }

@@ -3,14 +3,35 @@
 #include "accel/parallel.h"
 #include "accel/sparse_tree.h"
 
+#include <immintrin.h>
 #include <tbb/parallel_sort.h>
 
+#include <algorithm>
 #include <array>
+#include <span>
 
 namespace canopy {
 namespace {
 
 constexpr size_t kParallelSubtreeGrain = 4 * 1024;
+constexpr size_t kParallelSortGrain = 16 * 1024;  // smaller sorts (Bonsai's mini-trees) stay on one thread
+
+// The box the sweep grows ref by ref, in SSE registers (lane 3 holds the refs' ids and is ignored). Its half area
+// takes the same float operations in the same order as BBox::half_area, so costs are identical.
+struct SweepBox {
+    __m128 lower = _mm_set1_ps(std::numeric_limits<float>::infinity());
+    __m128 upper = _mm_set1_ps(-std::numeric_limits<float>::infinity());
+
+    void extend(const PrimRef& r) {
+        lower = _mm_min_ps(lower, _mm_load_ps(&r.lower.x));
+        upper = _mm_max_ps(upper, _mm_load_ps(&r.upper.x));
+    }
+    float half_area() const {
+        alignas(16) float e[4];
+        _mm_store_ps(e, _mm_sub_ps(upper, lower));
+        return e[0] * e[1] + e[1] * e[2] + e[2] * e[0];
+    }
+};
 
 struct Split {
     int axis = -1;
@@ -20,9 +41,12 @@ struct Split {
 
 class SweepSahBuilder {
 public:
-    SweepSahBuilder(const std::vector<PrimRef>& refs, const BuildSettings& settings)
+    SweepSahBuilder(std::span<const PrimRef> refs, const BuildSettings& settings, uint32_t median_depth)
         : refs_(refs), settings_(settings), max_leaf_(std::max<uint32_t>(settings.max_leaf_size, 1)),
-          scratch_(refs.size()), right_area_(refs.size()), goes_left_(refs.size()), nodes_(refs.size()) {
+          median_depth_(median_depth),
+          scratch_(refs.size()), right_area_(refs.size()), goes_left_(refs.size()), leaf_tests_(refs.size() + 1),
+          nodes_(refs.size()) {
+        for (uint32_t n = 0; n < leaf_tests_.size(); ++n) leaf_tests_[n] = settings.leaf_tests(n);
         for (int axis = 0; axis < 3; ++axis) sort_by_centroid(axis);
     }
 
@@ -41,14 +65,18 @@ private:
     float centroid(uint32_t ref, int axis) const { return refs_[ref].lower[axis] + refs_[ref].upper[axis]; }
 
     // Ties are broken by index so that the order, and with it the tree, is the same on every run.
+    // Keys are sorted beside their indices so that comparisons do not reach into the refs.
     void sort_by_centroid(int axis) {
+        std::vector<std::pair<float, uint32_t>> keyed(refs_.size());
+        for (uint32_t i = 0; i < keyed.size(); ++i) keyed[i] = {centroid(i, axis), i};
+        if (keyed.size() < kParallelSortGrain) {
+            std::sort(keyed.begin(), keyed.end());
+        } else {
+            tbb::parallel_sort(keyed.begin(), keyed.end());
+        }
         std::vector<uint32_t>& order = order_[axis];
         order.resize(refs_.size());
-        for (uint32_t i = 0; i < order.size(); ++i) order[i] = i;
-        tbb::parallel_sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) {
-            const float ca = centroid(a, axis), cb = centroid(b, axis);
-            return ca < cb || (ca == cb && a < b);
-        });
+        for (uint32_t i = 0; i < order.size(); ++i) order[i] = keyed[i].second;
     }
 
     // The sweep (MacDonald and Booth, sec. 3): right-to-left areas first, then left to right.
@@ -56,15 +84,15 @@ private:
         Split best;
         for (int axis = 0; axis < 3; ++axis) {
             const std::vector<uint32_t>& order = order_[axis];
-            BBox right;
+            SweepBox right;
             for (uint32_t i = end; i-- > begin + 1;) {
-                right.extend(refs_[order[i]].bounds());
-                right_area_[i] = right.half_area() * settings_.leaf_tests(end - i);
+                right.extend(refs_[order[i]]);
+                right_area_[i] = right.half_area() * leaf_tests_[end - i];
             }
-            BBox left;
+            SweepBox left;
             for (uint32_t i = begin + 1; i < end; ++i) {
-                left.extend(refs_[order[i - 1]].bounds());
-                const float cost = left.half_area() * settings_.leaf_tests(i - begin) + right_area_[i];
+                left.extend(refs_[order[i - 1]]);
+                const float cost = left.half_area() * leaf_tests_[i - begin] + right_area_[i];
                 if (cost < best.cost) best = {axis, i, cost};
             }
         }
@@ -76,7 +104,7 @@ private:
         const uint32_t n = end - begin;
         if (n == 1) return nodes_.set_leaf(node, bounds, begin, n);
         Split split;
-        if (depth < kMedianFallbackDepth) {
+        if (depth < median_depth_) {
             split = best_split(begin, end);
             const float area = bounds.half_area();
             const float split_cost = settings_.costs.inner * area + settings_.costs.triangle * split.cost;
@@ -121,13 +149,15 @@ private:
         return b;
     }
 
-    const std::vector<PrimRef>& refs_;
+    std::span<const PrimRef> refs_;
     const BuildSettings& settings_;
     const uint32_t max_leaf_;
+    const uint32_t median_depth_;  // depth from which nodes are cut at the median
     std::array<std::vector<uint32_t>, 3> order_;
     std::vector<uint32_t> scratch_;    // by position: subtrees use disjoint ranges
     std::vector<float> right_area_;    // by position
     std::vector<uint8_t> goes_left_;   // by ref: subtrees hold disjoint refs
+    std::vector<float> leaf_tests_;    // settings.leaf_tests(n) by n: the sweep asks for every n
     SparseTree nodes_;
 };
 
@@ -135,7 +165,12 @@ private:
 
 Bvh build_sweep_sah(BuildInput&& input, const BuildSettings& settings) {
     if (input.refs.empty()) return {};
-    return SweepSahBuilder(input.refs, settings).build();
+    return SweepSahBuilder(input.refs, settings, kMedianFallbackDepth).build();
+}
+
+Bvh build_sweep_sah_subtree(std::span<const PrimRef> refs, const BuildSettings& settings, uint32_t median_depth) {
+    if (refs.empty()) return {};
+    return SweepSahBuilder(refs, settings, median_depth).build();
 }
 
 }  // namespace canopy
