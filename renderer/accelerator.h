@@ -40,7 +40,9 @@ public:
     virtual void build() = 0;
     virtual uint64_t render(const ShadingScene& scene, const PinholeCamera& camera, uint32_t frame, Image& image,
                             const std::function<void(float)>& on_tile = {}) const = 0;
-    virtual AcceleratorReport report() const = 0;
+    // Tree statistics and metrics after a build; with_epo = false skips EPO, whose exact clipping takes minutes
+    // on millions of triangles.
+    virtual AcceleratorReport report(bool with_epo) const = 0;
     // One closest-hit query, for tests and tools; frames go through render().
     virtual Hit trace(const Ray& ray) const = 0;
     // The same query through the counting variant of the kernel: what the ray visited. Throws

@@ -106,8 +106,10 @@ void print_table(const std::vector<Entry>& entries, uint64_t tris) {
         const double frame = e.frame_mean();
         std::printf("%-22s %10.2f %8.2f %10.2f %8.2f %11.0f ", e.label().c_str(), e.build_min(),
                     double(tris) / e.build_min() / 1e3, frame, e.rays_per_frame() / frame / 1e3, e.rays_per_frame());
-        if (r.sah && r.epo) std::printf("%8.2f %7.2f ", *r.sah, *r.epo);
-        else std::printf("%8s %7s ", "-", "-");
+        if (r.sah) std::printf("%8.2f ", *r.sah);
+        else std::printf("%8s ", "-");
+        if (r.epo) std::printf("%7.2f ", *r.epo);
+        else std::printf("%7s ", "-");
         if (r.layout_sah) std::printf("%7.2f ", *r.layout_sah);  // eq. 1 of the traversal layout, wide nodes
         else std::printf("%7s ", "-");
         if (r.nodes) std::printf("%9llu %9llu %7.1f ", (unsigned long long)*r.nodes, (unsigned long long)*r.leaves,
@@ -207,7 +209,7 @@ void run_bench(const BenchOptions& o) {
     }
     for (size_t i = 0; i < entries.size(); ++i) {
         entries[i].image_mean = images[i].mean(o.frames);
-        entries[i].report = entries[i].accel->report();
+        entries[i].report = entries[i].accel->report(o.epo);
     }
 
     print_table(entries, tris);

@@ -21,6 +21,7 @@ struct BenchOptions {
     int bounces = 8;
     bool material_albedo = false;
     std::string json_path;
+    bool epo = true;  // EPO in the report (exact, slow on millions of triangles)
 };
 
 // Runs ../shared/BENCHMARK.md's measurement for every requested accelerator in one process,

@@ -147,11 +147,12 @@ public:
         });
     }
 
-    AcceleratorReport report() const override {
+    AcceleratorReport report(bool with_epo) const override {
         if (two_level_input_) return two_level_report();
         const TreeStats stats = tree_stats(binary_, scene_.triangles.size());
-        AcceleratorReport r{sah_cost(binary_, SahCosts{}), epo_cost(binary_, scene_.triangles), {}, {}, stats.nodes,
+        AcceleratorReport r{sah_cost(binary_, SahCosts{}), {}, {}, {}, stats.nodes,
                             stats.leaves, stats.depth, {}, stats.refs_per_triangle};
+        if (with_epo) r.epo = epo_cost(binary_, scene_.triangles);
         if (binary_.split.reference_capacity) {
             r.split_ms = binary_.split.split_ms;
             r.ref_capacity_per_tri = double(binary_.split.reference_capacity) / double(scene_.triangles.size());
@@ -160,7 +161,7 @@ public:
             if constexpr (!is_two_level<Layout>) {
                 r.bytes = bvh.bytes();
                 r.layout_sah = sah_cost(bvh);
-                r.layout_epo = epo_cost(bvh, scene_.triangles);
+                if (with_epo) r.layout_epo = epo_cost(bvh, scene_.triangles);
             }
         }, layout_);
         return r;
@@ -233,7 +234,7 @@ public:
     }
     Hit trace(const Ray& ray) const override { return built().trace(ray); }
     TraversalCounts count(const Ray& ray) const override { return built().count(ray); }
-    AcceleratorReport report() const override { return built().report(); }
+    AcceleratorReport report(bool with_epo) const override { return built().report(with_epo); }
 
 private:
     const Accelerator& built() const {

@@ -121,7 +121,7 @@ public:
         throw std::invalid_argument("Embree does not report what a ray visits: heatmaps need a canopy kernel");
     }
 
-    AcceleratorReport report() const override {
+    AcceleratorReport report(bool) const override {
         AcceleratorReport r;
         r.bytes = uint64_t(std::max<int64_t>(build_bytes_.load(), 0));  // net bytes the build allocated
         return r;

@@ -140,6 +140,7 @@ int main(int argc, char** argv) {
     bench->add_option("--frames", b.frames, "Timed frames after one warm-up")->check(CLI::Range(1, 10000))->capture_default_str();
     bench->add_option("--bounces", b.bounces, "Maximum bounces")->check(CLI::Range(0, 1024))->capture_default_str();
     bench->add_option("--json", b.json_path, "Write results as JSON");
+    bench->add_flag("!--no-epo", b.epo, "Skip EPO in the report (minutes on millions of triangles)");
     bench->add_option("--threads", threads, "Threads for every library (0: all)")->check(CLI::Range(0, 4096));
     bench->add_flag("--materials", b.material_albedo, "Use the .mtl Kd colours as albedo");
     bench->add_option("--traversal", b.traversals, "Traversal modes: robust, fast")->delimiter(',')

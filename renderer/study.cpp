@@ -233,7 +233,7 @@ void run_study(const StudyOptions& o) {
             auto scalar = make_canopy_accelerator(flat, {name, "", "bvh2"});
             auto simd = make_canopy_accelerator(flat, {name, "", "auto"});
             for (Accelerator* a : {scalar.get(), simd.get()}) a->prepare(), a->build();
-            const AcceleratorReport rs = scalar->report(), rw = simd->report();
+            const AcceleratorReport rs = scalar->report(true), rw = simd->report(true);
             Row row{name, *rs.sah, *rs.epo, ns_per_ray(*scalar, rays, o.repeats),
                     *rw.sah, *rw.epo, leaf_count_variability(*simd, rays), ns_per_ray(*simd, rays, o.repeats),
                     *rw.layout_sah, *rw.layout_epo};

@@ -100,7 +100,7 @@ TEST_CASE("LCV is the standard deviation of leaves visited per ray", "[metrics]"
         auto accel = make_canopy_accelerator(flat, {"binned", "", kernel});
         accel->prepare();
         accel->build();
-        const uint64_t leaves = *accel->report().leaves;
+        const uint64_t leaves = *accel->report(false).leaves;
         INFO(kernel << ", " << leaves << " leaves");
         REQUIRE((leaves == 1 || leaves == 2));
         CHECK(leaf_count_variability(*accel, rays) == Approx(std::sqrt(leaves == 2 ? 2.0 / 3.0 : 2.0 / 9.0)));
