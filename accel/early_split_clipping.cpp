@@ -6,8 +6,7 @@
 
 #include <algorithm>
 #include <chrono>
-#include <cstdio>
-#include <cstdlib>
+#include <limits>
 #include <cmath>
 #include <stdexcept>
 #include <string>
@@ -16,6 +15,10 @@ namespace canopy {
 namespace {
 
 constexpr size_t kGrain = 1024;
+// The automatic SA_max's constants (early_split_clipping.h): split scenes whose boxes are filled below 10% on the
+// whole, into pieces of at most 4 median ideal areas.
+constexpr double kMaxFillToSplit = 0.1;
+constexpr double kIdealAreasPerPiece = 4.0;
 
 // Alg. 4 with an explicit stack; depth-first, left before right, so the pieces come out in a fixed order.
 template <class Emit>
@@ -42,34 +45,28 @@ uint32_t clip_until_small(const Triangle& t, const BBox& whole, float sa_max, Em
     return pieces;
 }
 
-uint64_t count_pieces(std::span<const Triangle> triangles, const std::vector<PrimRef>& refs, float sa_max) {
-    return parallel::reduce(
-        refs.size(), kGrain, uint64_t{0},
-        [&](size_t b, size_t e) {
-            uint64_t sum = 0;
-            for (size_t i = b; i < e; ++i)
-                sum += refs[i].bounds().area() <= sa_max ? 1 : clip_until_small(triangles[refs[i].prim], refs[i].bounds(), sa_max, [](const BBox&) {});
-            return sum;
-        },
-        [](uint64_t a, uint64_t b) { return a + b; });
+// A_ideal of Karras and Aila 2013 (sec. 5): the summed box areas of infinitely fine pieces of the triangle,
+// twice its projected area on the three axis planes.
+float ideal_area(const Triangle& t) {
+    const Vec3 n = geometric_normal(t);
+    return std::abs(n.x) + std::abs(n.y) + std::abs(n.z);
 }
 
 }  // namespace
 
 float automatic_sa_max(std::span<const Triangle> triangles, const std::vector<PrimRef>& refs) {
-    if (refs.empty()) return 0.0f;
-    std::vector<float> areas(refs.size());
-    parallel::for_each(refs.size(), 16 * 1024, [&](size_t i) { areas[i] = refs[i].bounds().area(); });
-    const double k = std::getenv("ESC_K") ? std::atof(std::getenv("ESC_K")) : 4.0;
-    const double q = std::getenv("ESC_Q") ? std::atof(std::getenv("ESC_Q")) : 0.5;
-    const double g = std::getenv("ESC_G") ? std::atof(std::getenv("ESC_G")) : 0.5;
-    auto nth = areas.begin() + std::ptrdiff_t(q * double(areas.size() - 1));
-    std::nth_element(areas.begin(), nth, areas.end());
-    float sa_max = float(k * *nth);
-    if (!(sa_max > 0.0f)) return 0.0f;
-    while (count_pieces(triangles, refs, sa_max) > uint64_t((1.0 + g) * double(refs.size()))) sa_max *= 2.0f;
-    std::fprintf(stderr, "esc: sa_max %g (k %g q %g g %g) \n", sa_max, k, q, g);
-    return sa_max;
+    const size_t n = refs.size();
+    if (n == 0) return std::numeric_limits<float>::infinity();
+    std::vector<float> ideal(n);
+    parallel::for_each(n, 16 * 1024, [&](size_t i) { ideal[i] = ideal_area(triangles[refs[i].prim]); });
+    const double ideal_sum = parallel::sum_in_order(n, 16 * 1024, [&](size_t i) { return double(ideal[i]); });
+    const double box_sum = parallel::sum_in_order(n, 16 * 1024, [&](size_t i) { return double(refs[i].bounds().area()); });
+    const double fill = box_sum > 0.0 ? ideal_sum / box_sum : 1.0;
+    if (fill >= kMaxFillToSplit) return std::numeric_limits<float>::infinity();
+    const auto median = ideal.begin() + std::ptrdiff_t(n / 2);
+    std::nth_element(ideal.begin(), median, ideal.end());
+    const auto sa_max = float(kIdealAreasPerPiece * double(*median));
+    return sa_max > 0.0f ? sa_max : std::numeric_limits<float>::infinity();  // most triangles degenerate
 }
 
 std::vector<PrimRef> early_split_clip_refs(std::span<const Triangle> triangles, std::vector<PrimRef>&& refs, float sa_max) {
@@ -101,7 +98,7 @@ Bvh build_esc_with(BuildInput&& input, const BuildSettings& settings, const EscS
         throw std::invalid_argument("esc: SA_max must be finite and >= 0 (0: automatic), got " + std::to_string(esc.sa_max));
     const auto start = std::chrono::steady_clock::now();
     const float sa_max = esc.sa_max > 0.0f ? esc.sa_max : automatic_sa_max(input.triangles, input.refs);
-    if (sa_max > 0.0f) input.refs = early_split_clip_refs(input.triangles, std::move(input.refs), sa_max);
+    if (std::isfinite(sa_max) && sa_max > 0.0f) input.refs = early_split_clip_refs(input.triangles, std::move(input.refs), sa_max);
     const double split_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
     const uint64_t capacity = input.refs.size();
     Bvh bvh = build_binned_sah(std::move(input), settings);

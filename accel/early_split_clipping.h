@@ -7,7 +7,7 @@
 namespace canopy {
 
 struct EscSettings {
-    float sa_max = 0.0f;  // surface-area limit of a reference's box (full area, BBox::area); 0 chooses it automatically
+    float sa_max = 0.0f;  // surface-area limit of a reference's box (full area, BBox::area); 0: automatic_sa_max
 };
 
 // Algorithm 4 of Ernst and Greiner 2007: a triangle's box is halved at the centre of its largest axis, each half
@@ -16,7 +16,15 @@ struct EscSettings {
 constexpr int kMaxEscDepth = 10;
 std::vector<PrimRef> early_split_clip_refs(std::span<const Triangle> triangles, std::vector<PrimRef>&& refs, float sa_max);
 
-// The automatic SA_max (the paper leaves its choice open, sec. 5): see early_split_clipping.cpp.
+// The automatic SA_max; Ernst and Greiner leave its choice open (sec. 5). Splitting pays where triangles' boxes are
+// mostly empty (slivers across the axes), and hurts where large boxes hold large, well-filled triangles (walls,
+// floors: their pieces mix into subtrees of other geometry and inflate them). So, with A_ideal the box area of a
+// triangle cut into infinitely fine pieces (twice its projected areas, Karras and Aila 2013 sec. 5):
+//   fill = sum A_ideal / sum A_box over the scene;
+//   fill >= 0.1 (boxes on the whole at most 10x what their triangles need): no splitting, SA_max = infinity;
+//   otherwise SA_max = 4 median(A_ideal): pieces are cut until a typical triangle's box is filled to a quarter.
+// Measured fills: every scene in ../shared/scenes, gen:surface, gen:box, gen:triangles 0.31-0.48; gen:cylinders 0.03.
+// Returns infinity for no splitting.
 float automatic_sa_max(std::span<const Triangle> triangles, const std::vector<PrimRef>& refs);
 
 // early_split_clip_refs, then binned SAH (accel/binned_sah.h) on the grown references.

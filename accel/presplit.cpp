@@ -90,14 +90,7 @@ uint64_t total_splits(const std::vector<float>& priority, double scale) {
 
 // The scale D of sec. 5 (s_t = floor(D p_t)): the largest found by bisection whose total stays in the budget.
 double budget_scale(const std::vector<float>& priority, uint64_t budget) {
-    const double sum = parallel::reduce(
-        priority.size(), kGrain, 0.0,
-        [&](size_t b, size_t e) {
-            double s = 0;
-            for (size_t i = b; i < e; ++i) s += priority[i];
-            return s;
-        },
-        [](double a, double b) { return a + b; });
+    const double sum = parallel::sum_in_order(priority.size(), kGrain, [&](size_t i) { return double(priority[i]); });
     if (sum <= 0.0 || budget == 0) return 0.0;
     // floor loses less than one split per triangle: D = budget / sum fits, (budget + n) / sum reaches the budget.
     double lo = double(budget) / sum, hi = (double(budget) + double(priority.size())) / sum;

@@ -144,14 +144,18 @@ TEST_CASE("early split clipping pieces lie in their triangle, cover it and respe
     CHECK_THROWS_AS(build_esc_with(BuildInput{tris, make_prim_refs(tris)}, {}, EscSettings{-1.0f}), std::invalid_argument);
 }
 
-TEST_CASE("automatic SA_max splits the large boxes of a scene and bounds the growth", "[builders][split]") {
-    const FlatScene flat = flatten(load_scene("gen:cylinders?tris=20000&seed=3"));
-    const std::vector<PrimRef> refs = make_prim_refs(flat.triangles);
-    const float sa_max = automatic_sa_max(flat.triangles, refs);
-    REQUIRE(sa_max > 0.0f);
-    const size_t grown = early_split_clip_refs(flat.triangles, make_prim_refs(flat.triangles), sa_max).size();
-    CHECK(grown > refs.size());
-    CHECK(grown <= 2 * refs.size());
+TEST_CASE("automatic SA_max splits scenes of slivers and leaves well-filled boxes alone", "[builders][split]") {
+    const FlatScene slivers = flatten(load_scene("gen:cylinders?tris=20000&seed=3"));
+    const float sa_max = automatic_sa_max(slivers.triangles, make_prim_refs(slivers.triangles));
+    REQUIRE(std::isfinite(sa_max));
+    CHECK(early_split_clip_refs(slivers.triangles, make_prim_refs(slivers.triangles), sa_max).size() > 2 * slivers.triangles.size());
+    for (const char* spec : {"gen:surface?tris=20000&seed=3", "gen:box?tris=20000&seed=3"}) {
+        const FlatScene filled = flatten(load_scene(spec));
+        INFO(spec);
+        CHECK(std::isinf(automatic_sa_max(filled.triangles, make_prim_refs(filled.triangles))));
+        const Bvh esc = build_esc(BuildInput{filled.triangles, make_prim_refs(filled.triangles)}, {});
+        CHECK(esc.refs.size() == filled.triangles.size());
+    }
 }
 
 TEST_CASE("sbvh leaves of a triangle cover it; the reference cap holds", "[builders][split]") {
