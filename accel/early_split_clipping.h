@@ -16,7 +16,7 @@ struct EscSettings {
 constexpr int kMaxEscDepth = 10;
 std::vector<PrimRef> early_split_clip_refs(std::span<const Triangle> triangles, std::vector<PrimRef>&& refs, float sa_max);
 
-// The automatic SA_max; Ernst and Greiner leave its choice open (sec. 5). Splitting pays where triangles' boxes are
+// The automatic SA_max; Ernst and Greiner leave its choice open. Splitting pays where triangles' boxes are
 // mostly empty (slivers across the axes), and hurts where large boxes hold large, well-filled triangles (walls,
 // floors: their pieces mix into subtrees of other geometry and inflate them). So, with A_ideal the box area of a
 // triangle cut into infinitely fine pieces (twice its projected areas, Karras and Aila 2013 sec. 5):

@@ -129,7 +129,7 @@ private:
         if (n > 1 && depth < kMedianFallbackDepth) {
             Candidate object = best_object_split(e, info);
             Candidate spatial;
-            // Sec. 4.5: spatial splits only where the object split leaves overlap, and only within the memory cap.
+            // Stich et al.: spatial splits only where the object split leaves overlap, and only within the memory cap.
             BBox overlap = object.left;
             overlap.lower = glm::max(overlap.lower, object.right.lower);
             overlap.upper = glm::min(overlap.upper, object.right.upper);
@@ -180,8 +180,8 @@ private:
         return best;
     }
 
-    // Sec. 4.3: spatial bins over the node's bounds (largest axis, see kSpatialBins); each reference is clipped into every bin it spans and
-    // counted as entering its first bin and leaving its last.
+    // Stich et al.: spatial bins over the node's bounds (its largest axis, see kSpatialBins); each reference is
+    // clipped into every bin it spans and counted as entering its first bin and leaving its last.
     struct SpatialBins {
         std::array<Bin, kSpatialBins> bins;
         std::array<uint32_t, kSpatialBins> entries{}, exits{};
@@ -240,7 +240,7 @@ private:
 
     enum class Side : uint8_t { left, right, both };
 
-    // Sec. 4.4, reference unsplitting: a straddling reference goes whole to one side when that is cheaper
+    // Reference unsplitting (Stich et al.): a straddling reference goes whole to one side when that is cheaper
     // than splitting it (costs against the split's bins, so every reference is decided independently).
     Side place(const PrimRef& ref, const Candidate& split) const {
         const float tl = settings_.leaf_tests(split.left_count), tr = settings_.leaf_tests(split.right_count);

@@ -5,7 +5,7 @@ namespace canopy {
 
 struct SbvhSettings {
     // Spatial splits are tried only where the best object split's children overlap by more than alpha times the
-    // root's surface area (Stich et al. 2009 sec. 4.5); 1e-5 as in the quality-metrics paper.
+    // root's surface area (Stich et al. 2009); 1e-5 as in the quality-metrics paper.
     float alpha = 1e-5f;
     // Memory cap: at most this many references per triangle in all. Each subtree gets a share of the spare slots
     // in proportion to its references and splits only within it, so the tree does not depend on thread timing;
@@ -15,8 +15,8 @@ struct SbvhSettings {
 };
 
 // Split BVH (Stich, Friedrich and Dietrich 2009): top-down, at each node the cheaper of the best binned object
-// split and the best binned spatial split, whose straddling references are clipped to the plane (exact bounds,
-// accel/triangle_clipping.h) or kept whole on one side where that is cheaper (reference unsplitting, sec. 4.4).
+// split and the best binned spatial split (on the node's largest axis, see sbvh.cpp), whose straddling references are clipped to the plane (exact bounds,
+// accel/triangle_clipping.h) or kept whole on one side where that is cheaper (Stich et al.'s reference unsplitting).
 // Parallel over subtrees; the tree does not depend on the number of threads.
 Bvh build_sbvh_with(BuildInput&& input, const BuildSettings& settings, const SbvhSettings& sbvh);
 Bvh build_sbvh(BuildInput&& input, const BuildSettings& settings);
