@@ -16,9 +16,9 @@ namespace {
 
 constexpr size_t kGrain = 1024;
 // The automatic SA_max's constants (early_split_clipping.h): split scenes whose boxes are filled below 10% on the
-// whole, into pieces of at most 4 median ideal areas.
+// whole, into pieces of at most 8 median ideal areas.
 constexpr double kMaxFillToSplit = 0.1;
-constexpr double kIdealAreasPerPiece = 4.0;
+constexpr double kIdealAreasPerPiece = 8.0;
 
 // Alg. 4 with an explicit stack; depth-first, left before right, so the pieces come out in a fixed order.
 template <class Emit>
