@@ -7,7 +7,9 @@
 #include <tbb/parallel_invoke.h>
 #include <tbb/parallel_reduce.h>
 
+#include <algorithm>
 #include <cstddef>
+#include <vector>
 
 namespace canopy::parallel {
 
@@ -33,11 +35,28 @@ T reduce(size_t n, size_t grain, const T& identity, F&& f, Join&& join) {
         join);
 }
 
+// Sums f(i) over [0, n) in fixed blocks of `grain`, the blocks added in order: the same double with any number
+// of threads (a floating-point reduce is not associative, so its value would depend on how the range was cut).
+template <class F>
+double sum_in_order(size_t n, size_t grain, F&& f);
+
 template <class F>
 void for_each(size_t n, size_t grain, F&& f) {
     tbb::parallel_for(tbb::blocked_range<size_t>(0, n, grain), [&](const tbb::blocked_range<size_t>& r) {
         for (size_t i = r.begin(); i != r.end(); ++i) f(i);
     });
+}
+
+template <class F>
+double sum_in_order(size_t n, size_t grain, F&& f) {
+    const size_t blocks = (n + grain - 1) / grain;
+    std::vector<double> partial(blocks, 0.0);
+    for_each(blocks, 1, [&](size_t b) {
+        for (size_t i = b * grain; i < std::min(n, (b + 1) * grain); ++i) partial[b] += f(i);
+    });
+    double total = 0.0;
+    for (double p : partial) total += p;
+    return total;
 }
 
 }  // namespace canopy::parallel

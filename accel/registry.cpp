@@ -3,10 +3,14 @@
 #include "accel/binned_sah.h"
 #include "accel/bittner_reinsertion.h"
 #include "accel/bonsai.h"
+#include "accel/early_split_clipping.h"
 #include "accel/lbvh.h"
 #include "accel/lbvh_sah.h"
 #include "accel/ploc.h"
+#include "accel/presplit.h"
+#include "accel/sbvh.h"
 #include "accel/sweep_sah.h"
+#include "accel/streelet.h"
 #include "accel/tree_rotations.h"
 #include "accel/treelet_restructuring.h"
 
@@ -23,11 +27,15 @@ const std::vector<BuilderEntry>& builders() {
         {"lbvh-sah", "LBVH with leaves collapsed bottom-up where SAH prefers a leaf", &build_lbvh_sah},
         {"ploc", "parallel locally-ordered clustering (Meister and Bittner 2018), radius 16; one triangle per leaf",
          static_cast<BuildFunction>(&build_ploc)},
+        {"sbvh", "split BVH (Stich et al. 2009): binned object and spatial splits, reference unsplitting, 2x reference cap", &build_sbvh},
+        {"presplit", "budgeted pre-splitting (Karras and Aila 2013), 50% budget, then binned SAH", &build_presplit},
+        {"esc", "early split clipping (Ernst and Greiner 2007) with automatic SA_max, then binned SAH", &build_esc},
         {"sweep", "full sweep SAH (MacDonald and Booth 1990), leaves by SAH termination", &build_sweep_sah},
         {"bittner", "optimiser: removal and reinsertion of inefficient nodes (Bittner et al. 2013)", &build_bittner, "lbvh"},
         {"hillclimb", "optimiser: tree rotations by hill climbing (Kensler 2008)", &build_hillclimb, "lbvh"},
         {"anneal", "optimiser: tree rotations by simulated annealing (Kensler 2008)", &build_anneal, "lbvh"},
         {"treelet", "optimiser: optimal treelet restructuring, 3 rounds (Karras and Aila 2013)", &build_treelet, "lbvh"},
+        {"streelet", "Karras and Aila 2013 with splitting: 30% pre-split quota, LBVH, 3 rounds of treelets", &build_streelet},
         {"bonsai", "Bonsai (Ganestam et al. 2015): mid-point partitions, sweep SAH mini-trees, pruning, sweep SAH top tree",
          &build_bonsai},
         {"bonsai-split", "BONSAIS (Ganestam and Doggett 2016): Bonsai with SAH-guided split partitioning", &build_bonsai_split},
