@@ -1,11 +1,11 @@
 #include "accel/early_split_clipping.h"
+#include "accel/split_pass.h"
 
 #include "accel/binned_sah.h"
 #include "accel/parallel.h"
 #include "accel/triangle_clipping.h"
 
 #include <algorithm>
-#include <chrono>
 #include <limits>
 #include <cmath>
 #include <stdexcept>
@@ -96,14 +96,12 @@ std::vector<PrimRef> early_split_clip_refs(std::span<const Triangle> triangles, 
 Bvh build_esc_with(BuildInput&& input, const BuildSettings& settings, const EscSettings& esc) {
     if (!(esc.sa_max >= 0.0f) || !std::isfinite(esc.sa_max))
         throw std::invalid_argument("esc: SA_max must be finite and >= 0 (0: automatic), got " + std::to_string(esc.sa_max));
-    const auto start = std::chrono::steady_clock::now();
-    const float sa_max = esc.sa_max > 0.0f ? esc.sa_max : automatic_sa_max(input.triangles, input.refs);
-    if (std::isfinite(sa_max) && sa_max > 0.0f) input.refs = early_split_clip_refs(input.triangles, std::move(input.refs), sa_max);
-    const double split_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
-    const uint64_t capacity = input.refs.size();
-    Bvh bvh = build_binned_sah(std::move(input), settings);
-    bvh.split = {split_ms, capacity};
-    return bvh;
+    auto clip = [&](std::span<const Triangle> triangles, std::vector<PrimRef>&& refs) {
+        const float sa_max = esc.sa_max > 0.0f ? esc.sa_max : automatic_sa_max(triangles, refs);
+        return std::isfinite(sa_max) && sa_max > 0.0f ? early_split_clip_refs(triangles, std::move(refs), sa_max)
+                                                       : std::move(refs);
+    };
+    return build_after_split_pass(std::move(input), settings, clip, &build_binned_sah);
 }
 
 Bvh build_esc(BuildInput&& input, const BuildSettings& settings) {

@@ -1,11 +1,11 @@
 #include "accel/presplit.h"
+#include "accel/split_pass.h"
 
 #include "accel/binned_sah.h"
 #include "accel/parallel.h"
 #include "accel/triangle_clipping.h"
 
 #include <bit>
-#include <chrono>
 #include <cmath>
 #include <stdexcept>
 
@@ -144,13 +144,10 @@ std::vector<PrimRef> presplit_refs(std::span<const Triangle> triangles, std::vec
 }
 
 Bvh build_presplit_with(BuildInput&& input, const BuildSettings& settings, const PresplitSettings& presplit) {
-    const auto start = std::chrono::steady_clock::now();
-    input.refs = presplit_refs(input.triangles, std::move(input.refs), presplit.budget);
-    const double split_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
-    const uint64_t capacity = input.refs.size();
-    Bvh bvh = build_binned_sah(std::move(input), settings);
-    bvh.split = {split_ms, capacity};
-    return bvh;
+    auto split = [&](std::span<const Triangle> triangles, std::vector<PrimRef>&& refs) {
+        return presplit_refs(triangles, std::move(refs), presplit.budget);
+    };
+    return build_after_split_pass(std::move(input), settings, split, &build_binned_sah);
 }
 
 Bvh build_presplit(BuildInput&& input, const BuildSettings& settings) {

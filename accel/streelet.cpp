@@ -1,10 +1,10 @@
 #include "accel/streelet.h"
+#include "accel/split_pass.h"
 
 #include "accel/lbvh.h"
 #include "accel/presplit.h"
 #include "accel/treelet_restructuring.h"
 
-#include <chrono>
 
 namespace canopy {
 
@@ -12,14 +12,15 @@ namespace canopy {
 constexpr float kStreeletSplitQuota = 0.3f;
 
 Bvh build_streelet(BuildInput&& input, const BuildSettings& settings) {
-    const auto start = std::chrono::steady_clock::now();
-    input.refs = presplit_refs(input.triangles, std::move(input.refs), kStreeletSplitQuota);
-    const double split_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
-    const uint64_t capacity = input.refs.capacity();
-    Bvh bvh = build_lbvh(std::move(input), settings);
-    optimise_treelets(bvh, settings);
-    bvh.split = {split_ms, capacity};
-    return bvh;
+    auto split = [](std::span<const Triangle> triangles, std::vector<PrimRef>&& refs) {
+        return presplit_refs(triangles, std::move(refs), kStreeletSplitQuota);
+    };
+    auto lbvh_then_treelets = [](BuildInput&& pieces, const BuildSettings& s) {
+        Bvh bvh = build_lbvh(std::move(pieces), s);
+        optimise_treelets(bvh, s);
+        return bvh;
+    };
+    return build_after_split_pass(std::move(input), settings, split, +lbvh_then_treelets);
 }
 
 }  // namespace canopy

@@ -277,6 +277,7 @@ TEST_CASE("auto chooses two-level only with instances and plans for the frames a
     accel->prepare();
     accel->build();
     CHECK(accel->builder() == "auto");
-    CHECK_NOTHROW(find_builder(accel->chosen()));
+    const std::string chosen = accel->chosen();  // an optimiser names its start tree: "bittner<lbvh"
+    CHECK_NOTHROW(find_builder(chosen.substr(0, chosen.find('<'))));
     CHECK_THROWS_WITH(make_canopy_accelerator(flat, options), Catch::Contains("auto"));
 }
