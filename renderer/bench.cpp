@@ -153,6 +153,9 @@ nlohmann::json to_json(const std::vector<Entry>& entries, const BenchOptions& o,
                            {"refs_per_tri", or_null(r.refs_per_tri)},
                            {"split_ms", or_null(r.split_ms)},
                            {"ref_capacity_per_tri", or_null(r.ref_capacity_per_tri)},
+                           {"objects_ms", or_null(r.objects_ms)},
+                           {"top_level_ms", or_null(r.top_level_ms)},
+                           {"brefs", or_null(r.brefs)},
                            {"bytes", or_null(r.bytes)},
                            {"image_mean", e.image_mean},
                            {"time_to_image_ms", {{"1", e.build_min() + frame},
@@ -213,8 +216,12 @@ void run_bench(const BenchOptions& o) {
     }
 
     print_table(entries, tris);
-    for (const Entry& e : entries)
+    for (const Entry& e : entries) {
         if (!e.accel->reason().empty()) std::printf("%s: %s\n", e.label().c_str(), e.accel->reason().c_str());
+        if (e.report.top_level_ms)
+            std::printf("%s: object trees %.2f ms, top level %.2f ms over %llu BRefs (last build)\n", e.label().c_str(),
+                        *e.report.objects_ms, *e.report.top_level_ms, (unsigned long long)*e.report.brefs);
+    }
     if (!o.json_path.empty()) {
         std::ofstream out(o.json_path);
         out << to_json(entries, o, tris).dump(2) << "\n";

@@ -75,7 +75,7 @@ private:
 }  // namespace
 
 void write_plot_png(const LogLogPlot& plot, const std::string& path, int width, int height) {
-    constexpr int left = 80, right = 200, top = 64, bottom = 60;  // margins: the legend sits on the right
+    constexpr int left = 80, right = 260, top = 64, bottom = 60;  // margins: the legend sits on the right
     const Decades dx = decades_of(plot, true), dy = decades_of(plot, false);
     const double plot_w = width - left - right, plot_h = height - top - bottom;
     auto px = [&](double x) { return left + (std::log10(x) - dx.low) / (dx.high - dx.low) * plot_w; };
