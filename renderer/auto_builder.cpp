@@ -108,8 +108,10 @@ AutoChoice choose_builder(const SceneStatistics& stats, int frames, uint64_t pix
     }
     char reason[320];
     std::snprintf(reason, sizeof reason,
-                  "%llu triangles (%llu unique), box excess %.2f, %d frames planned: predicted build %.0f ms + %d x %.0f ms",
-                  (unsigned long long)stats.triangles, (unsigned long long)stats.unique_triangles, stats.box_excess,
+                  "%llu triangles (%llu unique) in %llu placed objects, box excess %.2f, %d frames planned: predicted build "
+                  "%.1f ms + %d x %.1f ms",
+                  (unsigned long long)stats.triangles, (unsigned long long)stats.unique_triangles,
+                  (unsigned long long)stats.placements, stats.box_excess,
                   frames, build_ms, frames, frame_ms);
     best.reason = reason;
     return best;
