@@ -68,7 +68,7 @@ private:
 };
 
 // Wide trees: a leaf is a child slot of its parent; references are triangle slots in WideBvh::leaves (one per
-// LeafTriangle, four per TriangleBlock4, padding lanes holding no triangle).
+// LeafTriangle, block_lanes(N) per TriangleBlock, padding lanes holding no triangle).
 template <int N>
 class WideView {
 public:
@@ -91,12 +91,12 @@ public:
     }
     uint32_t reference_count() const { return uint32_t(bvh_.leaves.size()) * kPerEntry; }
     uint32_t prim_at(uint32_t position) const {
-        if constexpr (N > 2) return bvh_.leaves[position / 4].prim[position % 4];
+        if constexpr (N > 2) return bvh_.leaves[position / kPerEntry].prim[position % kPerEntry];
         else return bvh_.leaves[position].prim;
     }
 
 private:
-    static constexpr uint32_t kPerEntry = N > 2 ? 4 : 1;
+    static constexpr uint32_t kPerEntry = uint32_t(block_lanes(N));
     RefRange leaf_range(uint32_t first_entry, uint32_t count) const {
         return {first_entry * kPerEntry, first_entry * kPerEntry + count};
     }

@@ -100,13 +100,14 @@ void fill_leaf(LeafTriangle* out, const Bvh& bvh, std::span<const Triangle> tria
     }
 }
 
-void fill_leaf(TriangleBlock4* out, const Bvh& bvh, std::span<const Triangle> triangles, uint32_t first_ref,
+template <int W>
+void fill_leaf(TriangleBlock<W>* out, const Bvh& bvh, std::span<const Triangle> triangles, uint32_t first_ref,
                uint32_t count) {
-    for (uint32_t b = 0; b < leaf_entries(4, count); ++b) {
-        TriangleBlock4& block = out[b];
-        for (int lane = 0; lane < 4; ++lane) {
-            const uint32_t i = b * 4 + uint32_t(lane);
-            const uint32_t prim = i < count ? bvh.refs[first_ref + i] : TriangleBlock4::kNone;
+    for (uint32_t b = 0; b < leaf_entries(W, count); ++b) {
+        TriangleBlock<W>& block = out[b];
+        for (int lane = 0; lane < W; ++lane) {
+            const uint32_t i = b * W + uint32_t(lane);
+            const uint32_t prim = i < count ? bvh.refs[first_ref + i] : TriangleBlock<W>::kNone;
             const Triangle t = i < count ? triangles[prim] : Triangle{Vec3(0), Vec3(0), Vec3(0)};
             const Vec3* vertices[3] = {&t.v0, &t.v1, &t.v2};
             for (int v = 0; v < 3; ++v)

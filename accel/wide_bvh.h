@@ -36,22 +36,29 @@ struct LeafTriangle {
     Vec3 v1, v2;
 };
 
-// Four triangles in SoA for the SIMD intersector: v[vertex][axis][lane]. Lanes past a leaf's end hold a
+// W triangles in SoA for the SIMD intersector: v[vertex][axis][lane]. Lanes past a leaf's end hold a
 // degenerate triangle at the origin (never hit) and prim kNone.
-struct alignas(16) TriangleBlock4 {
+template <int W>
+struct alignas(4 * W) TriangleBlock {
+    static constexpr int kLanes = W;
     static constexpr uint32_t kNone = 0xffffffffu;
-    float v[3][3][4];
-    uint32_t prim[4];
+    float v[3][3][W];
+    uint32_t prim[W];
 };
-static_assert(sizeof(TriangleBlock4) == 160);
+static_assert(sizeof(TriangleBlock<4>) == 160 && sizeof(TriangleBlock<8>) == 320);
 
-// Binary nodes are traced with the scalar intersector, one LeafTriangle at a time; wide nodes with the SIMD
-// one, four triangles per TriangleBlock4. A leaf child's `child` indexes `leaves`; its `count` is always
-// the number of triangles.
+// Lanes of the intersector a width's kernel uses: binary nodes test one LeafTriangle at a time with the scalar
+// intersector; BVH4 tests 4 triangles at once with SSE and BVH8 8 with AVX, as many as its node test's lanes.
+constexpr int block_lanes(int width) { return width > 2 ? width : 1; }
+
+// A leaf child's `child` indexes `leaves`; its `count` is always the number of triangles.
 template <int N>
-using LeafOf = std::conditional_t<(N > 2), TriangleBlock4, LeafTriangle>;
+using LeafOf = std::conditional_t<(N > 2), TriangleBlock<block_lanes(N)>, LeafTriangle>;
 
-inline uint32_t leaf_entries(int width, uint32_t triangles) { return width > 2 ? (triangles + 3) / 4 : triangles; }
+inline uint32_t leaf_entries(int width, uint32_t triangles) {
+    const uint32_t lanes = uint32_t(block_lanes(width));
+    return (triangles + lanes - 1) / lanes;
+}
 
 template <int N>
 using WideNodes = std::vector<WideNode<N>, HugePageAllocator<WideNode<N>>>;

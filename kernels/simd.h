@@ -1,9 +1,13 @@
 #pragma once
 // Thin SIMD float vectors for the wide kernels: Simd<4> on SSE, Simd<8> on AVX. max/min keep their second
 // operand where the first is NaN (the x86 semantics), which the slab test relies on: pass the running value
-// second and a NaN from 0 * inf never replaces it, exactly as in the scalar test.
+// second and a NaN from 0 * inf never replaces it, exactly as in the scalar test. Comparisons are ordered
+// (false on NaN) except cmpneq, which is true on NaN as in IEEE 754.
 #include <immintrin.h>
 
+#include "kernels/ray.h"
+
+#include <bit>
 #include <cstdint>
 
 namespace canopy::simd {
@@ -11,17 +15,46 @@ namespace canopy::simd {
 template <int W>
 struct Simd;
 
+// A per-ray value broadcast once to the widest vector this build has; a W-lane test reads its low W lanes
+// (Simd<W>::low), so a ray set up once serves every block width.
+#if defined(__AVX2__)
+using Broadcast = __m256;
+inline Broadcast broadcast(float x) { return _mm256_set1_ps(x); }
+#else
+using Broadcast = __m128;
+inline Broadcast broadcast(float x) { return _mm_set1_ps(x); }
+#endif
+
 template <>
 struct Simd<4> {
     using F = __m128;
     static F load(const float* p) { return _mm_load_ps(p); }
     static F set1(float x) { return _mm_set1_ps(x); }
+#if defined(__AVX2__)
+    static F low(Broadcast b) { return _mm256_castps256_ps128(b); }
+#else
+    static F low(Broadcast b) { return b; }
+#endif
+    static F zero() { return _mm_setzero_ps(); }
+    static F add(F a, F b) { return _mm_add_ps(a, b); }
     static F sub(F a, F b) { return _mm_sub_ps(a, b); }
     static F mul(F a, F b) { return _mm_mul_ps(a, b); }
+    static F div(F a, F b) { return _mm_div_ps(a, b); }
     static F fmsub(F a, F b, F c) { return _mm_fmsub_ps(a, b, c); }
+    static F fnmadd(F a, F b, F c) { return _mm_fnmadd_ps(a, b, c); }
     static F max(F a, F b) { return _mm_max_ps(a, b); }
     static F min(F a, F b) { return _mm_min_ps(a, b); }
-    static uint32_t le_mask(F a, F b) { return uint32_t(_mm_movemask_ps(_mm_cmple_ps(a, b))); }
+    static F bit_and(F a, F b) { return _mm_and_ps(a, b); }
+    static F bit_or(F a, F b) { return _mm_or_ps(a, b); }
+    static F bit_xor(F a, F b) { return _mm_xor_ps(a, b); }
+    static F and_not(F a, F b) { return _mm_andnot_ps(a, b); }  // ~a & b
+    static F lt(F a, F b) { return _mm_cmplt_ps(a, b); }
+    static F le(F a, F b) { return _mm_cmple_ps(a, b); }
+    static F gt(F a, F b) { return _mm_cmpgt_ps(a, b); }
+    static F ge(F a, F b) { return _mm_cmpge_ps(a, b); }
+    static F neq(F a, F b) { return _mm_cmpneq_ps(a, b); }
+    static uint32_t mask(F a) { return uint32_t(_mm_movemask_ps(a)); }
+    static uint32_t le_mask(F a, F b) { return mask(le(a, b)); }
     static void store(float* p, F a) { _mm_storeu_ps(p, a); }
 };
 
@@ -31,14 +64,48 @@ struct Simd<8> {
     using F = __m256;
     static F load(const float* p) { return _mm256_load_ps(p); }
     static F set1(float x) { return _mm256_set1_ps(x); }
+    static F low(Broadcast b) { return b; }
+    static F zero() { return _mm256_setzero_ps(); }
+    static F add(F a, F b) { return _mm256_add_ps(a, b); }
     static F sub(F a, F b) { return _mm256_sub_ps(a, b); }
     static F mul(F a, F b) { return _mm256_mul_ps(a, b); }
+    static F div(F a, F b) { return _mm256_div_ps(a, b); }
     static F fmsub(F a, F b, F c) { return _mm256_fmsub_ps(a, b, c); }
+    static F fnmadd(F a, F b, F c) { return _mm256_fnmadd_ps(a, b, c); }
     static F max(F a, F b) { return _mm256_max_ps(a, b); }
     static F min(F a, F b) { return _mm256_min_ps(a, b); }
-    static uint32_t le_mask(F a, F b) { return uint32_t(_mm256_movemask_ps(_mm256_cmp_ps(a, b, _CMP_LE_OQ))); }
+    static F bit_and(F a, F b) { return _mm256_and_ps(a, b); }
+    static F bit_or(F a, F b) { return _mm256_or_ps(a, b); }
+    static F bit_xor(F a, F b) { return _mm256_xor_ps(a, b); }
+    static F and_not(F a, F b) { return _mm256_andnot_ps(a, b); }
+    static F lt(F a, F b) { return _mm256_cmp_ps(a, b, _CMP_LT_OQ); }
+    static F le(F a, F b) { return _mm256_cmp_ps(a, b, _CMP_LE_OQ); }
+    static F gt(F a, F b) { return _mm256_cmp_ps(a, b, _CMP_GT_OQ); }
+    static F ge(F a, F b) { return _mm256_cmp_ps(a, b, _CMP_GE_OQ); }
+    static F neq(F a, F b) { return _mm256_cmp_ps(a, b, _CMP_NEQ_UQ); }
+    static uint32_t mask(F a) { return uint32_t(_mm256_movemask_ps(a)); }
+    static uint32_t le_mask(F a, F b) { return mask(le(a, b)); }
     static void store(float* p, F a) { _mm256_storeu_ps(p, a); }
 };
 #endif
+
+// Records in `hit` the nearest of the lanes in `lanes` (a bit mask of valid hits) and returns its lane, or -1
+// when there are none. Ties go to the later lane, as the scalar kernel's loop over a leaf's triangles does.
+template <class S>
+int record_nearest(uint32_t lanes, typename S::F t, typename S::F u, typename S::F v, const uint32_t* prim, Hit& hit) {
+    if (!lanes) return -1;
+    constexpr int W = sizeof(typename S::F) / sizeof(float);
+    alignas(32) float ts[W], us[W], vs[W];
+    S::store(ts, t);
+    S::store(us, u);
+    S::store(vs, v);
+    int best = std::countr_zero(lanes);
+    for (lanes &= lanes - 1; lanes; lanes &= lanes - 1) {
+        const int lane = std::countr_zero(lanes);
+        if (ts[lane] <= ts[best]) best = lane;
+    }
+    hit = {ts[best], us[best], vs[best], prim[best]};
+    return best;
+}
 
 }  // namespace canopy::simd

@@ -124,7 +124,7 @@ inline bool intersect_leaf(const WideBvh<N>& bvh, const StackEntry& leaf, const 
         }
     } else {
         const uint32_t end = leaf.child + leaf_entries(N, leaf.count);
-        for (uint32_t b = leaf.child; b < end; ++b) found |= tri_ray.intersect4(bvh.leaves[b], tmin, hit) >= 0;
+        for (uint32_t b = leaf.child; b < end; ++b) found |= tri_ray.intersect_block(bvh.leaves[b], tmin, hit) >= 0;
     }
     return found;
 }
