@@ -70,7 +70,7 @@ size_t parse_choice(const std::vector<Placement>& all, const FlatScene& flat, co
             throw std::invalid_argument("--dynamic " + spec + ": no placed object of that index (the scene has " + range + ")");
         return std::stoul(spec);
     }
-    if (const auto found = by_name(all, spec)) return *found;
+    if (const auto found = spec.empty() ? std::nullopt : by_name(all, spec)) return *found;
     throw std::invalid_argument("--dynamic '" + spec + "': no object or mesh of that name (give a name, an index from " +
                                 range + ", or auto)");
 }
