@@ -83,7 +83,8 @@ int vertical_axis(const Vec3& up) {
 
 // The carousel's pivot, beside the object's centre along one horizontal axis, as far as the object's horizontal
 // bounding circle stays in the scene: the centre reaches twice the radius towards the pivot's side and the radius
-// either way across. Of the four sides, the one that allows the widest circle.
+// either way across. Of the four sides, the one that allows the widest circle, up to the object's own diameter:
+// it moves about its place, which keeps it in view where it was in view at rest.
 void place_pivot(DynamicObject& object, const BBox& bounds, const BBox& scene) {
     const int a = (object.up_axis + 1) % 3, b = (object.up_axis + 2) % 3;
     const Vec3 centre = bounds.center();
@@ -96,7 +97,8 @@ void place_pivot(DynamicObject& object, const BBox& bounds, const BBox& scene) {
         const int across = along == a ? b : a;
         const float sideways = std::min(room_below(across), room_above(across));
         for (const float side : {-1.0f, 1.0f}) {
-            const float radius = std::min(0.5f * (side > 0 ? room_above(along) : room_below(along)), sideways);
+            const float room = std::min(0.5f * (side > 0 ? room_above(along) : room_below(along)), sideways);
+            const float radius = std::min(room, 2.0f * reach);
             if (!(radius > object.path_radius)) continue;
             object.path_radius = radius;
             object.pivot = centre;

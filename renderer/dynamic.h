@@ -31,8 +31,8 @@ struct DynamicObject {
 DynamicObject choose_dynamic_object(const Scene& scene, const FlatScene& flat, const std::string& spec);
 
 // The object's placement at `frame`: its rest placement followed by a rotation about the pivot axis by
-// frame / kFramesPerTurn of a turn. The path radius is the largest that keeps the object's horizontal bounding
-// circle inside the scene's bounds (0 when even the circle at rest does not fit).
+// frame / kFramesPerTurn of a turn. The path radius is the object's horizontal diameter, or less where the
+// object's horizontal bounding circle would leave the scene's bounds (0 when even the circle at rest does not fit).
 glm::mat4 dynamic_placement(const DynamicObject& object, uint32_t frame);
 
 // Writes the object's world triangles under `to_world` into the flat scene, computed as flatten() computes them.
