@@ -152,7 +152,7 @@ int main(int argc, char** argv) {
         bench->add_option("--dynamic", dynamic,
                           "Dynamic-in-static (Benthin 2017, Table 3): this object moves every frame; each frame's rebuild "
                           "and render are timed. An object or mesh name, a placement index, or auto (alone: the largest "
-                          "object spanning at most a quarter of the scene)")
+                          "object spanning at most a quarter of the scene); --builds is then 1")
             ->expected(0, 1)->default_str("auto");
     std::vector<int> bench_size{1024, 768};
     bench->add_option("--size", bench_size, "Width and height")->expected(2)->check(CLI::Range(1, 16384))->capture_default_str();
