@@ -288,7 +288,7 @@ template <int N>
 TwoLevelBvh<N> build_two_level(const TwoLevelInput& input, const TwoLevelSettings& settings, TwoLevelTimes* times) {
     TwoLevelBvh<N> bvh;
     const BuilderEntry& builder = find_builder(settings.blas_builder);
-    auto start = Clock::now();
+    const auto start = Clock::now();
     bvh.objects.resize(input.objects.size());
     parallel::for_each(input.objects.size(), 1, [&](size_t i) {
         const std::vector<Triangle>& triangles = input.objects[i];
@@ -297,13 +297,19 @@ TwoLevelBvh<N> build_two_level(const TwoLevelInput& input, const TwoLevelSetting
         bvh.objects[i] = collapse<N>(object, triangles);
     });
     if (times) times->objects_ms = ms_since(start);
-    start = Clock::now();
+    rebuild_top_level(bvh, input, settings, times);
+    return bvh;
+}
+
+template <int N>
+void rebuild_top_level(TwoLevelBvh<N>& bvh, const TwoLevelInput& input, const TwoLevelSettings& settings,
+                       TwoLevelTimes* times) {
+    const auto start = Clock::now();
     std::vector<TwoLevelInstance> placed;  // instances of empty objects have nothing to trace
     for (const TwoLevelInstance& instance : input.instances)
         if (!input.objects[instance.object].empty()) placed.push_back(instance);
     build_top_level(bvh, placed, settings);
     if (times) times->top_level_ms = ms_since(start);
-    return bvh;
 }
 
 namespace {
@@ -366,5 +372,8 @@ template TwoLevelBvh<8> build_two_level<8>(const TwoLevelInput&, const TwoLevelS
 template void build_top_level<2>(TwoLevelBvh<2>&, const std::vector<TwoLevelInstance>&, const TwoLevelSettings&);
 template void build_top_level<4>(TwoLevelBvh<4>&, const std::vector<TwoLevelInstance>&, const TwoLevelSettings&);
 template void build_top_level<8>(TwoLevelBvh<8>&, const std::vector<TwoLevelInstance>&, const TwoLevelSettings&);
+template void rebuild_top_level<2>(TwoLevelBvh<2>&, const TwoLevelInput&, const TwoLevelSettings&, TwoLevelTimes*);
+template void rebuild_top_level<4>(TwoLevelBvh<4>&, const TwoLevelInput&, const TwoLevelSettings&, TwoLevelTimes*);
+template void rebuild_top_level<8>(TwoLevelBvh<8>&, const TwoLevelInput&, const TwoLevelSettings&, TwoLevelTimes*);
 
 }  // namespace canopy

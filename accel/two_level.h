@@ -87,6 +87,12 @@ TwoLevelBvh<N> build_two_level(const TwoLevelInput& input, const TwoLevelSetting
 template <int N>
 void build_top_level(TwoLevelBvh<N>& bvh, const std::vector<TwoLevelInstance>& instances, const TwoLevelSettings& settings);
 
+// The same over the input's instances, skipping those of empty objects as build_two_level does; times only
+// the top level. All a rigid move of an instance needs: its object tree stays valid (sec. 6.3, Table 3).
+template <int N>
+void rebuild_top_level(TwoLevelBvh<N>& bvh, const TwoLevelInput& input, const TwoLevelSettings& settings,
+                       TwoLevelTimes* times = nullptr);
+
 // Eq. 1 over the whole two-level structure as traversal sees it: top-level nodes, then for each top-level
 // leaf the object subtree below its entry, every box in world space (conservatively transformed).
 template <int N>

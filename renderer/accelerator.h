@@ -23,6 +23,15 @@ struct AcceleratorReport {
     std::optional<uint64_t> brefs;                   // two-level builds: top-level leaf references
 };
 
+// Dynamic-in-static scenes (Benthin et al. 2017, sec. 6.3): one placement, an instance of
+// two_level_input(scene), moved rigidly to `to_world`; the flat scene's triangles [first_triangle,
+// first_triangle + triangle_count) already show it there.
+struct PlacementMove {
+    uint32_t placement = 0;
+    glm::mat4 to_world{1.0f};
+    uint32_t first_triangle = 0, triangle_count = 0;
+};
+
 class Accelerator {
 public:
     virtual ~Accelerator() = default;
@@ -38,6 +47,10 @@ public:
     // Untimed preparation for one build (canopy: PrimRef generation), then the timed build.
     virtual void prepare() = 0;
     virtual void build() = 0;
+    // After a build: rebuilds what the move invalidates (timed by the caller). A flat BVH knows no placements
+    // and is built again over all world triangles, PrimRefs included; a two-level one rebuilds its top level
+    // only, as a rigid move leaves every object tree valid.
+    virtual void move(const PlacementMove& move) = 0;
     virtual uint64_t render(const ShadingScene& scene, const PinholeCamera& camera, uint32_t frame, Image& image,
                             const std::function<void(float)>& on_tile = {}) const = 0;
     // Tree statistics and metrics after a build; with_epo = false skips EPO, whose exact clipping takes minutes

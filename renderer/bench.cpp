@@ -2,6 +2,7 @@
 
 #include "accel/builder.h"
 #include "renderer/accelerator.h"
+#include "renderer/dynamic.h"
 
 #include <nlohmann/json.hpp>
 
@@ -10,6 +11,7 @@
 #include <cstdio>
 #include <fstream>
 #include <numeric>
+#include <optional>
 #include <stdexcept>
 
 namespace canopy {
@@ -32,12 +34,15 @@ double mean(const std::vector<double>& v) { return std::accumulate(v.begin(), v.
 struct Entry {
     std::unique_ptr<Accelerator> accel;
     std::vector<double> build_ms, frame_ms;
+    std::vector<double> rebuild_ms;  // dynamic scenes: per timed frame, after the object moved
     uint64_t rays = 0;
     double image_mean = 0;
     AcceleratorReport report;  // taken once after the last build: EPO is not free
 
     double build_min() const { return *std::min_element(build_ms.begin(), build_ms.end()); }
     double frame_mean() const { return mean(frame_ms); }
+    double rebuild_mean() const { return mean(rebuild_ms); }
+    double total_mean() const { return rebuild_mean() + frame_mean(); }  // Table 3's build + render
     double rays_per_frame() const { return double(rays) / double(frame_ms.size()); }
     std::string label() const {
         if (accel->library() == "embree") return "embree " + accel->quality();
@@ -166,35 +171,33 @@ nlohmann::json to_json(const std::vector<Entry>& entries, const BenchOptions& o,
             {"height", o.height}, {"bounces", o.bounces}, {"results", results}};
 }
 
-}  // namespace
-
-void run_bench(const BenchOptions& o) {
-    auto start = Clock::now();
-    const Scene scene = load_scene(o.scene);
-    const double load_ms = ms_since(start);
-    start = Clock::now();
-    const FlatScene flat = flatten(scene);
-    const double flatten_ms = ms_since(start);
-    const uint64_t tris = flat.triangles.size();
-    start = Clock::now();
-    (void)make_prim_refs(flat.triangles);
-    const double primref_ms = ms_since(start);
-    std::printf("scene %s: %llu triangles; load %.1f ms, flatten %.1f ms, PrimRefs %.1f ms (not in build times)\n",
-                o.scene.c_str(), (unsigned long long)tris, load_ms, flatten_ms, primref_ms);
-    std::printf("protocol: %dx%d, %d bounces, %d builds (min), %d frames (mean) after 1 warm-up, threads %s\n",
-                o.width, o.height, o.bounces, o.builds, o.frames,
-                o.threads ? std::to_string(o.threads).c_str() : "all");
-
-    std::vector<Entry> entries = make_entries(scene, flat, o);
-    for (int round = 0; round < o.builds; ++round) {
+// Builds every entry `builds` times, alternating between them; the minimum is reported.
+void build_all(std::vector<Entry>& entries, int builds) {
+    for (int round = 0; round < builds; ++round) {
         for (Entry& e : entries) {
             e.accel->prepare();
-            start = Clock::now();
+            const auto start = Clock::now();
             e.accel->build();
             e.build_ms.push_back(ms_since(start));
         }
     }
+}
 
+// Dynamic-in-static (Benthin et al. 2017, sec. 6.3): the object takes its place for `frame` in the flat scene,
+// which every entry traces and shades, then each entry rebuilds what the move invalidates, timed.
+void move_all(std::vector<Entry>& entries, const DynamicObject& object, uint32_t frame, FlatScene& flat) {
+    const PlacementMove move = move_dynamic_object(object, frame, flat);
+    for (Entry& e : entries) {
+        const auto start = Clock::now();
+        e.accel->move(move);
+        e.rebuild_ms.push_back(ms_since(start));
+    }
+}
+
+// One untimed warm-up frame, then the timed frames, alternating between entries; with a dynamic object, it moves
+// before each timed frame (the warm-up shows it at rest, as built).
+void render_frames(std::vector<Entry>& entries, const Scene& scene, FlatScene& flat, const BenchOptions& o,
+                   const DynamicObject* dynamic) {
     FrameSettings settings;
     settings.width = o.width, settings.height = o.height, settings.max_bounces = o.bounces;
     settings.material_albedo = o.material_albedo;
@@ -204,17 +207,82 @@ void run_bench(const BenchOptions& o) {
     for (size_t i = 0; i < entries.size(); ++i) entries[i].accel->render(shading, camera, 0, images[i]);  // warm-up
     for (Image& image : images) image.clear();
     for (int frame = 1; frame <= o.frames; ++frame) {
+        if (dynamic) move_all(entries, *dynamic, uint32_t(frame), flat);
         for (size_t i = 0; i < entries.size(); ++i) {
-            start = Clock::now();
+            const auto start = Clock::now();
             entries[i].rays += entries[i].accel->render(shading, camera, uint32_t(frame), images[i]);
             entries[i].frame_ms.push_back(ms_since(start));
         }
     }
-    for (size_t i = 0; i < entries.size(); ++i) {
-        entries[i].image_mean = images[i].mean(o.frames);
-        entries[i].report = entries[i].accel->report(o.epo);
-    }
+    for (size_t i = 0; i < entries.size(); ++i) entries[i].image_mean = images[i].mean(o.frames);
+}
 
+void write_json(const nlohmann::json& j, const std::string& path) {
+    if (path.empty()) return;
+    std::ofstream out(path);
+    out << j.dump(2) << "\n";
+    if (!out) throw std::runtime_error(path + ": cannot write benchmark JSON");
+    std::printf("wrote %s\n", path.c_str());
+}
+
+// Table 3's baseline, "two-level + dyn": the first canopy two-level row.
+const Entry* two_level_row(const std::vector<Entry>& entries) {
+    for (const Entry& e : entries)
+        if (e.accel->library() == "canopy" && e.accel->builder().starts_with("two-level/")) return &e;
+    return nullptr;
+}
+
+// Sec. 6.3, Table 3: per frame, the rebuild, the frame and their sum, the sums against plain two-level.
+void print_dynamic_table(const std::vector<Entry>& entries) {
+    const Entry* ref = two_level_row(entries);
+    std::printf("\n%-30s %11s %11s %11s %11s %11s %8s %7s %10s\n", "accelerator", "first build", "rebuild ms",
+                "render ms", "total ms", "total/2lvl", "wSAH", "BRefs", "img mean");
+    for (const Entry& e : entries) {
+        const AcceleratorReport& r = e.report;
+        std::printf("%-30s %11.2f %11.2f %11.2f %11.2f ", e.label().c_str(), e.build_min(), e.rebuild_mean(),
+                    e.frame_mean(), e.total_mean());
+        if (ref) std::printf("%10.2fx ", e.total_mean() / ref->total_mean());
+        else std::printf("%11s ", "-");
+        if (r.layout_sah) std::printf("%8.2f ", *r.layout_sah);
+        else std::printf("%8s ", "-");
+        if (r.brefs) std::printf("%7llu ", (unsigned long long)*r.brefs);
+        else std::printf("%7s ", "-");
+        std::printf("%10.5f\n", e.image_mean);
+    }
+    std::printf("per frame means over the timed frames; wSAH and BRefs of the last frame's structure\n");
+}
+
+nlohmann::json dynamic_json(const std::vector<Entry>& entries, const BenchOptions& o, const DynamicObject& object,
+                            uint64_t tris) {
+    nlohmann::json results = nlohmann::json::array();
+    for (const Entry& e : entries) {
+        const bool canopy = e.accel->library() == "canopy";
+        results.push_back({{"accel", e.accel->library()},
+                           {"label", e.label()},
+                           {"builder", canopy ? nlohmann::json(e.accel->builder()) : nlohmann::json(nullptr)},
+                           {"kernel", canopy ? nlohmann::json(e.accel->kernel()) : nlohmann::json(nullptr)},
+                           {"quality", canopy ? nlohmann::json(nullptr) : nlohmann::json(e.accel->quality())},
+                           {"first_build_ms", e.build_min()},
+                           {"rebuild_ms_mean", e.rebuild_mean()},
+                           {"rebuild_ms_median", median(e.rebuild_ms)},
+                           {"render_ms_mean", e.frame_mean()},
+                           {"render_ms_median", median(e.frame_ms)},
+                           {"total_ms_mean", e.total_mean()},
+                           {"rays_per_frame", e.rays_per_frame()},
+                           {"layout_sah", or_null(e.report.layout_sah)},
+                           {"top_level_ms_last", or_null(e.report.top_level_ms)},
+                           {"brefs", or_null(e.report.brefs)},
+                           {"image_mean", e.image_mean}});
+    }
+    const nlohmann::json moving{{"placement", object.placement},     {"name", object.name},
+                                {"triangles", object.triangles.size()}, {"path_radius", object.path_radius},
+                                {"frames_per_turn", kFramesPerTurn}};
+    return {{"scene", o.scene}, {"tris", tris},     {"threads", o.threads}, {"width", o.width},
+            {"height", o.height}, {"bounces", o.bounces}, {"frames", o.frames},  {"dynamic", moving},
+            {"results", results}};
+}
+
+void report_static(const std::vector<Entry>& entries, const BenchOptions& o, uint64_t tris) {
     print_table(entries, tris);
     for (const Entry& e : entries) {
         if (!e.accel->reason().empty()) std::printf("%s: %s\n", e.label().c_str(), e.accel->reason().c_str());
@@ -222,12 +290,46 @@ void run_bench(const BenchOptions& o) {
             std::printf("%s: object trees %.2f ms, top level %.2f ms over %llu BRefs (last build)\n", e.label().c_str(),
                         *e.report.objects_ms, *e.report.top_level_ms, (unsigned long long)*e.report.brefs);
     }
-    if (!o.json_path.empty()) {
-        std::ofstream out(o.json_path);
-        out << to_json(entries, o, tris).dump(2) << "\n";
-        if (!out) throw std::runtime_error(o.json_path + ": cannot write benchmark JSON");
-        std::printf("wrote %s\n", o.json_path.c_str());
+    write_json(to_json(entries, o, tris), o.json_path);
+}
+
+}  // namespace
+
+void run_bench(const BenchOptions& o) {
+    auto start = Clock::now();
+    const Scene scene = load_scene(o.scene);
+    const double load_ms = ms_since(start);
+    start = Clock::now();
+    FlatScene flat = flatten(scene);  // a dynamic object moves in it
+    const double flatten_ms = ms_since(start);
+    const uint64_t tris = flat.triangles.size();
+    start = Clock::now();
+    (void)make_prim_refs(flat.triangles);
+    const double primref_ms = ms_since(start);
+    std::printf("scene %s: %llu triangles; load %.1f ms, flatten %.1f ms, PrimRefs %.1f ms (not in build times)\n",
+                o.scene.c_str(), (unsigned long long)tris, load_ms, flatten_ms, primref_ms);
+    const std::optional<DynamicObject> dynamic =
+        o.dynamic ? std::optional(choose_dynamic_object(scene, flat, *o.dynamic)) : std::nullopt;
+    if (dynamic) {
+        std::printf("dynamic-in-static (Benthin et al. 2017, sec. 6.3, Table 3): placement %u '%s', %zu triangles "
+                    "(%.2f%% of the scene), turning about an axis %.4g from its centre, a turn in %u frames\n",
+                    dynamic->placement, dynamic->name.c_str(), dynamic->triangles.size(),
+                    100.0 * double(dynamic->triangles.size()) / double(tris), dynamic->path_radius, kFramesPerTurn);
+        std::printf("protocol: %dx%d, %d bounces, 1 first build, then per frame a move, a timed rebuild and a timed "
+                    "frame; %d frames (mean) after 1 warm-up at rest, threads %s\n",
+                    o.width, o.height, o.bounces, o.frames, o.threads ? std::to_string(o.threads).c_str() : "all");
+    } else {
+        std::printf("protocol: %dx%d, %d bounces, %d builds (min), %d frames (mean) after 1 warm-up, threads %s\n",
+                    o.width, o.height, o.bounces, o.builds, o.frames, o.threads ? std::to_string(o.threads).c_str() : "all");
     }
+
+    std::vector<Entry> entries = make_entries(scene, flat, o);
+    build_all(entries, dynamic ? 1 : o.builds);
+    render_frames(entries, scene, flat, o, dynamic ? &*dynamic : nullptr);
+    for (Entry& e : entries) e.report = e.accel->report(o.epo && !dynamic);
+    if (!dynamic) return report_static(entries, o, tris);
+    print_dynamic_table(entries);
+    write_json(dynamic_json(entries, o, *dynamic, tris), o.json_path);
 }
 
 }  // namespace canopy

@@ -1,4 +1,5 @@
 #pragma once
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -22,6 +23,9 @@ struct BenchOptions {
     bool material_albedo = false;
     std::string json_path;
     bool epo = true;  // EPO in the report (exact, slow on millions of triangles)
+    // Dynamic-in-static (renderer/dynamic.h): the object that moves every frame ("auto", an index or a name);
+    // none for a static scene. Rebuilds are then timed per frame instead of --builds builds.
+    std::optional<std::string> dynamic;
 };
 
 // Runs ../shared/BENCHMARK.md's measurement for every requested accelerator in one process,

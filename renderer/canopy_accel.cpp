@@ -39,6 +39,12 @@ void build_two_level_into(AnyLayout& layout, const TwoLevelInput& input, const T
     if constexpr (kernel_compiled(N)) layout = build_two_level<N>(input, settings, &times);
 }
 
+template <int N>
+void rebuild_top_level_of(AnyLayout& layout, const TwoLevelInput& input, const TwoLevelSettings& settings,
+                          TwoLevelTimes& times) {
+    if constexpr (kernel_compiled(N)) rebuild_top_level(std::get<TwoLevelBvh<N>>(layout), input, settings, &times);
+}
+
 template <class Layout>
 constexpr bool is_two_level = requires(const Layout& l) { l.instances; };
 
@@ -122,6 +128,22 @@ public:
             case 2: collapse_into<2>(layout_, binary_, scene_.triangles); break;
             case 4: collapse_into<4>(layout_, binary_, scene_.triangles); break;
             default: collapse_into<8>(layout_, binary_, scene_.triangles); break;
+        }
+    }
+
+    // Model of a rigid move: the placement's transform changes, its object tree does not (sec. 6.3 rebuilds
+    // the dynamic objects too, because the paper's robot deforms).
+    void move(const PlacementMove& move) override {
+        if (!two_level_input_) {
+            prepare();
+            return build();
+        }
+        two_level_input_->instances.at(move.placement).to_world = move.to_world;
+        two_level_times_.objects_ms = 0;
+        switch (width_) {
+            case 2: rebuild_top_level_of<2>(layout_, *two_level_input_, two_level_settings_, two_level_times_); break;
+            case 4: rebuild_top_level_of<4>(layout_, *two_level_input_, two_level_settings_, two_level_times_); break;
+            default: rebuild_top_level_of<8>(layout_, *two_level_input_, two_level_settings_, two_level_times_); break;
         }
     }
 
@@ -228,6 +250,11 @@ public:
         choice_ = choice;
         chosen_->prepare();
         chosen_->build();
+    }
+
+    void move(const PlacementMove& move) override {
+        if (!chosen_) throw std::logic_error("auto accelerator moved before build()");
+        chosen_->move(move);
     }
 
     uint64_t render(const ShadingScene& scene, const PinholeCamera& camera, uint32_t frame, Image& image,

@@ -49,7 +49,7 @@ class EmbreeAccelerator final : public Accelerator {
 public:
     // `objects` non-null: Embree's two-level BVH, a scene per object under a scene of instances.
     EmbreeAccelerator(const FlatScene& scene, const std::string& quality, int threads, const TwoLevelInput* objects)
-        : quality_name_(quality), quality_(parse_quality(quality)) {
+        : flat_(scene), quality_name_(quality), quality_(parse_quality(quality)) {
         const std::string config = threads > 0 ? "threads=" + std::to_string(threads) : "";
         device_ = rtcNewDevice(config.c_str());
         if (!device_) throw std::runtime_error("Embree: cannot create a device");
@@ -104,6 +104,22 @@ public:
         }
         rtcCommitScene(scene_);
         if (rtcGetDeviceError(device_) != RTC_ERROR_NONE) throw std::runtime_error("Embree: scene build failed");
+    }
+
+    // Two-level: the instance's new transform and a commit of the top scene, which rebuilds it over the
+    // committed object scenes. Flat: the moved vertices, then a commit, which rebuilds the whole BVH.
+    void move(const PlacementMove& move) override {
+        RTCGeometry geometry = rtcGetGeometry(scene_, objects_ ? move.placement : 0);
+        if (objects_) {
+            rtcSetGeometryTransform(geometry, 0, RTC_FORMAT_FLOAT4X4_COLUMN_MAJOR, &move.to_world[0][0]);
+        } else {
+            std::memcpy(vertices_.data() + size_t(move.first_triangle) * 9, flat_.triangles.data() + move.first_triangle,
+                        size_t(move.triangle_count) * sizeof(Triangle));
+            rtcUpdateGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0);
+        }
+        rtcCommitGeometry(geometry);
+        rtcCommitScene(scene_);
+        if (rtcGetDeviceError(device_) != RTC_ERROR_NONE) throw std::runtime_error("Embree: scene rebuild failed");
     }
 
     uint64_t render(const ShadingScene& scene, const PinholeCamera& camera, uint32_t frame, Image& image,
@@ -177,6 +193,7 @@ private:
         return true;
     }
 
+    const FlatScene& flat_;
     std::string quality_name_;
     RTCBuildQuality quality_;
     RTCDevice device_ = nullptr;
