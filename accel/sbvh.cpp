@@ -154,28 +154,37 @@ private:
         }
     }
 
+    // Bins the references' centroids on all three axes in one pass over them: the pass is memory bound.
     Candidate best_object_split(const Extent& e, const NodeInfo& info) const {
-        Candidate best;
+        using AxesBins = std::array<std::array<Bin, kMaxObjectBins>, 3>;
         const uint32_t nb = std::min(object_bins_, std::max(e.count, 4u));
-        for (int axis = 0; axis < 3; ++axis) {
-            if (!(info.centroids.upper[axis] > info.centroids.lower[axis])) continue;
-            const AxisBins map(info.centroids.lower[axis], info.centroids.upper[axis], nb);
-            auto chunk = [&](size_t b, size_t end) {
-                std::array<Bin, kMaxObjectBins> bins;
-                for (size_t i = e.begin + b; i < e.begin + end; ++i) {
-                    Bin& bin = bins[map.bin(refs_[i].bounds().center()[axis])];
-                    bin.bounds.extend(refs_[i].bounds());
+        const std::array<AxisBins, 3> maps = {AxisBins(info.centroids.lower.x, info.centroids.upper.x, nb),
+                                              AxisBins(info.centroids.lower.y, info.centroids.upper.y, nb),
+                                              AxisBins(info.centroids.lower.z, info.centroids.upper.z, nb)};
+        auto chunk = [&](size_t b, size_t end) {
+            AxesBins bins;
+            for (size_t i = e.begin + b; i < e.begin + end; ++i) {
+                const BBox box = refs_[i].bounds();
+                const Vec3 centre = box.center();
+                for (int axis = 0; axis < 3; ++axis) {
+                    Bin& bin = bins[axis][maps[axis].bin(centre[axis])];
+                    bin.bounds.extend(box);
                     ++bin.count;
                 }
-                return bins;
-            };
-            auto join = [nb](std::array<Bin, kMaxObjectBins> a, const std::array<Bin, kMaxObjectBins>& b) {
-                for (uint32_t i = 0; i < nb; ++i) a[i].add(b[i]);
-                return a;
-            };
-            const auto bins = parallel::reduce(e.count, kParallelBinningGrain, std::array<Bin, kMaxObjectBins>{}, chunk, join);
-            auto count = [&](uint32_t i) { return bins[i].count; };
-            sweep(bins.data(), nb, axis, settings_, count, count, best);
+            }
+            return bins;
+        };
+        auto join = [nb](AxesBins a, const AxesBins& b) {
+            for (int axis = 0; axis < 3; ++axis)
+                for (uint32_t i = 0; i < nb; ++i) a[axis][i].add(b[axis][i]);
+            return a;
+        };
+        const AxesBins bins = parallel::reduce(e.count, kParallelBinningGrain, AxesBins{}, chunk, join);
+        Candidate best;
+        for (int axis = 0; axis < 3; ++axis) {
+            if (!(info.centroids.upper[axis] > info.centroids.lower[axis])) continue;
+            auto count = [&](uint32_t i) { return bins[axis][i].count; };
+            sweep(bins[axis].data(), nb, axis, settings_, count, count, best);
         }
         return best;
     }

@@ -5,10 +5,21 @@
 // cut box, and they are rounded outwards so that they always contain the exact piece.
 #include "accel/geometry.h"
 
+#include <bit>
 #include <cmath>
+#include <cstdint>
+#include <limits>
 #include <utility>
 
 namespace canopy {
+
+// std::nextafter(x, up ? +inf : -inf) without the library call, which took 10% of an SBVH build's clipping.
+inline float next_float(float x, bool up) {
+    if (!std::isfinite(x)) return std::nextafter(x, up ? INFINITY : -INFINITY);
+    if (x == 0.0f) return up ? std::numeric_limits<float>::denorm_min() : -std::numeric_limits<float>::denorm_min();
+    const uint32_t bits = std::bit_cast<uint32_t>(x);
+    return std::bit_cast<float>((x > 0.0f) == up ? bits + 1 : bits - 1);  // the magnitude grows or shrinks by an ulp
+}
 
 // The point where edge a-b crosses the plane (axis, position), computed in double and widened to a float box
 // that contains it: the other two coordinates round either way by at most an ulp.
@@ -22,8 +33,8 @@ inline BBox edge_plane_crossing(const Vec3& a, const Vec3& b, int axis, float po
         }
         const double exact = double(a[k]) + s * (double(b[k]) - double(a[k]));
         const float rounded = float(exact);
-        crossing.lower[k] = double(rounded) <= exact ? rounded : std::nextafter(rounded, -INFINITY);
-        crossing.upper[k] = double(rounded) >= exact ? rounded : std::nextafter(rounded, INFINITY);
+        crossing.lower[k] = double(rounded) <= exact ? rounded : next_float(rounded, false);
+        crossing.upper[k] = double(rounded) >= exact ? rounded : next_float(rounded, true);
     }
     return crossing;
 }
