@@ -34,8 +34,8 @@ using Clock = std::chrono::steady_clock;
 
 double ms_since(Clock::time_point start) { return std::chrono::duration<double, std::milli>(Clock::now() - start).count(); }
 
-PlacedObject place(const TwoLevelInstance& instance) {
-    PlacedObject placed{instance.object, instance.prim_offset, instance.to_world == glm::mat4(1.0f)};
+PlacedObject place(const TwoLevelInstance& instance, const ObjectTree& object) {
+    PlacedObject placed{instance.object, instance.prim_offset - object.prim_base, instance.to_world == glm::mat4(1.0f)};
     const glm::dmat4 inverse = glm::inverse(glm::dmat4(instance.to_world));
     for (int row = 0; row < 3; ++row)
         for (int col = 0; col < 4; ++col) placed.world_to_object[row][col] = float(inverse[col][row]);
@@ -53,6 +53,17 @@ struct BRef {
     bool openable() const { return count == 0; }
 };
 
+// Sec. 5.2: objects get #instances + max(#instances, #triangles / 1000) BRefs, instanced objects 4 x #instances.
+size_t bref_capacity(const std::vector<ObjectTree>& objects, const std::vector<TwoLevelInstance>& instances,
+                     const TwoLevelSettings& settings) {
+    if (settings.top == TopLevel::TwoLevel) return std::max<size_t>(instances.size(), 1);
+    const bool instanced = instances.size() > objects.size();
+    uint64_t triangles = 0;
+    for (const TwoLevelInstance& i : instances) triangles += objects[i.object].triangles;
+    const size_t n = instances.size();
+    return std::max<size_t>(instanced ? 4 * n : n + std::max<size_t>(n, triangles / 1000), 1);
+}
+
 struct Segment {
     uint32_t begin, end, extra_end;  // BRefs in [begin, end), free slots for opening in [end, extra_end) (sec. 5.2)
 };
@@ -61,12 +72,12 @@ template <int N>
 class TopLevelBuilder {
 public:
     TopLevelBuilder(const TwoLevelBvh<N>& bvh, const std::vector<TwoLevelInstance>& instances, const TwoLevelSettings& s)
-        : bvh_(bvh), instances_(instances), settings_(s), brefs_(capacity(bvh, instances, s)), nodes_(brefs_.size()) {}
+        : bvh_(bvh), instances_(instances), settings_(s), brefs_(bref_capacity(bvh.objects, instances, s)), nodes_(brefs_.size()) {}
 
     Bvh build() {
         for (uint32_t i = 0; i < instances_.size(); ++i) {
-            const WideBvh<N>& object = bvh_.objects[instances_[i].object];
-            brefs_[i] = {world_bounds(i, object.bounds), i, 0, 0, float(triangle_count(object))};
+            const ObjectTree& object = bvh_.objects[instances_[i].object];
+            brefs_[i] = {world_bounds(i, object.bounds), i, object.root, 0, float(object.triangles)};
         }
         const Segment all{0, uint32_t(instances_.size()), uint32_t(brefs_.size())};
         build_segment(all, 0, 1, settings_.top == TopLevel::Rebraid, 0);
@@ -78,24 +89,6 @@ public:
     const std::vector<BRef>& brefs() const { return brefs_; }
 
 private:
-    // Sec. 5.2: objects get #instances + max(#instances, #triangles / 1000) BRefs, instanced objects 4 x #instances.
-    static size_t capacity(const TwoLevelBvh<N>& bvh, const std::vector<TwoLevelInstance>& instances,
-                           const TwoLevelSettings& settings) {
-        if (settings.top == TopLevel::TwoLevel) return std::max<size_t>(instances.size(), 1);
-        const bool instanced = instances.size() > bvh.objects.size();
-        uint64_t triangles = 0;
-        for (const TwoLevelInstance& i : instances) triangles += triangle_count(bvh.objects[i.object]);
-        const size_t n = instances.size();
-        return std::max<size_t>(instanced ? 4 * n : n + std::max<size_t>(n, triangles / 1000), 1);
-    }
-
-    static uint64_t triangle_count(const WideBvh<N>& object) {
-        uint64_t n = 0;
-        for (const WideNode<N>& node : object.nodes)
-            for (int i = 0; i < N; ++i) n += node.count[i];
-        return n;
-    }
-
     BBox world_bounds(uint32_t instance, const BBox& box) const {
         return bvh_.instances[instance].identity ? box : transform_bounds(instances_[instance].to_world, box);
     }
@@ -142,7 +135,7 @@ private:
         for (uint32_t i = s.begin; i < s.end; ++i) {
             const BRef parent = brefs_[i];
             if (!parent.openable() || !(parent.bounds.extent()[dim] > threshold)) continue;
-            const WideNode<N>& node = bvh_.objects[bvh_.instances[parent.instance].object].nodes[parent.child];
+            const WideNode<N>& node = bvh_.pool.nodes[parent.child];
             int children = 0;
             for (int c = 0; c < N; ++c) children += !node.is_empty(c);
             if (end + uint32_t(children - 1) > s.extra_end) break;  // out of space: the rest stay closed
@@ -253,35 +246,115 @@ private:
 
 uint32_t one_entry_per_ref(int, uint32_t count) { return count; }
 
+void offset_prims(LeafTriangle& leaf, uint32_t base) { leaf.prim += base; }
+
+template <int W>
+void offset_prims(TriangleBlock<W>& block, uint32_t base) {
+    for (uint32_t& prim : block.prim)
+        if (prim != TriangleBlock<W>::kNone) prim += base;
+}
+
+// The offset an object's leaves bake into their triangle ids: that of its first identity placement (which the
+// top level may then reach directly), else of its first placement.
+std::vector<uint32_t> prim_bases(const TwoLevelInput& input) {
+    std::vector<uint32_t> base(input.objects.size(), 0);
+    std::vector<int> rank(input.objects.size(), 0);  // 0 none yet, 1 a placement, 2 an identity placement
+    for (const TwoLevelInstance& instance : input.instances) {
+        const int r = instance.to_world == glm::mat4(1.0f) ? 2 : 1;
+        if (r > rank[instance.object]) rank[instance.object] = r, base[instance.object] = instance.prim_offset;
+    }
+    return base;
+}
+
+// Copies every object's tree into the pool, in object order: node and leaf indices offset by where the tree
+// lands, triangle ids by the object's prim_base. Each tree is freed once copied. The node array keeps room for
+// `top_nodes` more, so that appending the top level does not move the object trees.
+template <int N>
+void pool_object_trees(TwoLevelBvh<N>& bvh, std::vector<WideBvh<N>>& trees, size_t top_nodes) {
+    std::vector<uint32_t> first_leaf(trees.size());
+    uint32_t nodes = 0, leaves = 0;
+    for (size_t o = 0; o < trees.size(); ++o) {
+        bvh.objects[o].root = nodes, first_leaf[o] = leaves;
+        nodes += uint32_t(trees[o].nodes.size()), leaves += uint32_t(trees[o].leaves.size());
+    }
+    bvh.object_nodes = nodes;
+    bvh.pool.nodes.reserve(nodes + top_nodes);
+    bvh.pool.nodes.resize(nodes);
+    bvh.pool.leaves.resize(leaves);
+    parallel::for_each(trees.size(), 1, [&](size_t o) {
+        const uint32_t node_base = bvh.objects[o].root, leaf_base = first_leaf[o];
+        for (size_t i = 0; i < trees[o].nodes.size(); ++i) {
+            WideNode<N> node = trees[o].nodes[i];
+            for (int c = 0; c < N; ++c)
+                if (!node.is_empty(c)) node.child[c] += node.is_leaf(c) ? leaf_base : node_base;
+            bvh.pool.nodes[node_base + i] = node;
+        }
+        for (size_t i = 0; i < trees[o].leaves.size(); ++i) {
+            bvh.pool.leaves[leaf_base + i] = trees[o].leaves[i];
+            offset_prims(bvh.pool.leaves[leaf_base + i], bvh.objects[o].prim_base);
+        }
+        trees[o] = WideBvh<N>{};
+    });
+}
+
+// Appends the collapsed top level to the pool after the object trees. Its leaves hold one BRef each: a BRef of a
+// direct() placement becomes the child itself, any other an entry.
+template <int N>
+void pool_top_level(TwoLevelBvh<N>& bvh, const WideNodes<N>& top, const std::vector<LeafRun>& runs,
+                    const std::vector<BRef>& brefs) {
+    const uint32_t base = bvh.object_nodes;
+    bvh.pool.nodes.resize(base);
+    bvh.pool.nodes.insert(bvh.pool.nodes.end(), top.begin(), top.end());
+    bvh.root = base;
+    bvh.entries.clear();
+    for (uint32_t i = base; i < bvh.pool.nodes.size(); ++i) {
+        WideNode<N>& node = bvh.pool.nodes[i];
+        for (int c = 0; c < N; ++c) {
+            if (node.is_empty(c)) continue;
+            if (!node.is_leaf(c)) {
+                node.child[c] += base;
+                continue;
+            }
+            const BRef& r = brefs[runs[node.child[c]].first_ref];  // collapse numbers one-BRef leaves in run order
+            if (bvh.instances[r.instance].direct()) {
+                node.child[c] = r.child, node.count[c] = r.count;
+            } else {
+                node.child[c] = uint32_t(bvh.entries.size()), node.count[c] = TwoLevelBvh<N>::kInstanceEntries | 1;
+                bvh.entries.push_back({r.instance, r.child, r.count});
+            }
+        }
+    }
+    bvh.brefs = uint32_t(runs.size());
+    // Traversal prefetches pool.leaves[child] for every leaf child it pushes, an entry's too: such an index stays
+    // inside the leaf array even in a scene with more entries than object leaves (the padding is never read).
+    if (bvh.pool.leaves.size() < bvh.entries.size()) bvh.pool.leaves.resize(bvh.entries.size(), LeafOf<N>{});
+}
+
 }  // namespace
 
 template <int N>
 uint64_t TwoLevelBvh<N>::bytes() const {
-    uint64_t total = nodes.size() * sizeof(WideNode<N>) + leaves.size() * sizeof(TopLevelRef) +
-                     instances.size() * sizeof(PlacedObject);
-    for (const WideBvh<N>& object : objects) total += object.bytes();
-    return total;
+    return pool.bytes() + entries.size() * sizeof(TopLevelRef) + instances.size() * sizeof(PlacedObject);
 }
 
 template <int N>
 void build_top_level(TwoLevelBvh<N>& bvh, const std::vector<TwoLevelInstance>& instances, const TwoLevelSettings& settings) {
     bvh.instances.resize(instances.size());
     bvh.to_world.resize(instances.size());
-    for (size_t i = 0; i < instances.size(); ++i) bvh.instances[i] = place(instances[i]), bvh.to_world[i] = instances[i].to_world;
-    bvh.nodes.clear();
-    bvh.leaves.clear();
+    for (size_t i = 0; i < instances.size(); ++i)
+        bvh.instances[i] = place(instances[i], bvh.objects[instances[i].object]), bvh.to_world[i] = instances[i].to_world;
+    bvh.pool.nodes.resize(bvh.object_nodes);
+    bvh.entries.clear();
+    bvh.brefs = 0;
     bvh.bounds = BBox{};
     if (instances.empty()) return;
     TopLevelBuilder<N> builder(bvh, instances, settings);
     const Bvh top = builder.build();
     bvh.bounds = top.nodes[0].bounds;
+    WideNodes<N> nodes;
     uint32_t entries = 0;
-    const std::vector<LeafRun> runs = collapse_nodes<N>(top, bvh.nodes, &one_entry_per_ref, entries);
-    bvh.leaves.resize(entries);
-    for (const LeafRun& run : runs) {
-        const BRef& r = builder.brefs()[run.first_ref];
-        bvh.leaves[run.first_entry] = {r.instance, r.child, r.count};
-    }
+    const std::vector<LeafRun> runs = collapse_nodes<N>(top, nodes, &one_entry_per_ref, entries);
+    pool_top_level(bvh, nodes, runs, builder.brefs());
 }
 
 template <int N>
@@ -289,13 +362,20 @@ TwoLevelBvh<N> build_two_level(const TwoLevelInput& input, const TwoLevelSetting
     TwoLevelBvh<N> bvh;
     const BuilderEntry& builder = find_builder(settings.blas_builder);
     const auto start = Clock::now();
+    const std::vector<uint32_t> bases = prim_bases(input);
     bvh.objects.resize(input.objects.size());
+    std::vector<WideBvh<N>> trees(input.objects.size());
     parallel::for_each(input.objects.size(), 1, [&](size_t i) {
         const std::vector<Triangle>& triangles = input.objects[i];
+        bvh.objects[i].triangles = uint32_t(triangles.size());
+        bvh.objects[i].prim_base = bases[i];
         if (triangles.empty()) return;
         const Bvh object = builder.build(BuildInput{triangles, make_prim_refs(triangles)}, settings.blas);
-        bvh.objects[i] = collapse<N>(object, triangles);
+        trees[i] = collapse<N>(object, triangles);
+        bvh.objects[i].bounds = trees[i].bounds;
     });
+    // A wide top level over at most one BRef per capacity slot has fewer nodes than slots (or one node).
+    pool_object_trees(bvh, trees, bref_capacity(bvh.objects, input.instances, settings));
     if (times) times->objects_ms = ms_since(start);
     rebuild_top_level(bvh, input, settings, times);
     return bvh;
@@ -320,34 +400,39 @@ BBox child_box(const auto& node, int c) {
     return box;
 }
 
-// The cost below one object-tree entry whose world box is `box`: C_tri per triangle of a leaf, C_inn per node.
+// The cost below one entry into an instance's object tree whose world box is `box`: C_tri per triangle of a
+// leaf, C_inn per node, each box transformed to world space.
 template <int N>
-double object_cost(const TwoLevelBvh<N>& bvh, const TopLevelRef& entry, const BBox& box, SahCosts costs) {
+double entry_cost(const TwoLevelBvh<N>& bvh, const TopLevelRef& entry, const BBox& box, SahCosts costs) {
     if (entry.count) return costs.triangle * double(entry.count) * box.half_area();
-    const PlacedObject& instance = bvh.instances[entry.instance];
-    const WideNode<N>& node = bvh.objects[instance.object].nodes[entry.child];
+    const WideNode<N>& node = bvh.pool.nodes[entry.child];
     double sum = costs.inner * box.half_area();
     for (int c = 0; c < N; ++c) {
         if (node.is_empty(c)) continue;
         const BBox local = child_box(node, c);
-        const BBox world = instance.identity ? local : transform_bounds(bvh.to_world[entry.instance], local);
-        sum += object_cost(bvh, {entry.instance, node.child[c], node.count[c]}, world, costs);
+        const BBox world = bvh.instances[entry.instance].identity ? local : transform_bounds(bvh.to_world[entry.instance], local);
+        sum += entry_cost(bvh, {entry.instance, node.child[c], node.count[c]}, world, costs);
     }
     return sum;
 }
 
+// The cost below a node of the pool reached with the world ray: a top-level node or an object node linked
+// directly, whose boxes are world boxes.
 template <int N>
-double top_cost(const TwoLevelBvh<N>& bvh, uint32_t index, const BBox& box, SahCosts costs) {
-    const WideNode<N>& node = bvh.nodes[index];
+double world_cost(const TwoLevelBvh<N>& bvh, uint32_t index, const BBox& box, SahCosts costs) {
+    const WideNode<N>& node = bvh.pool.nodes[index];
     double sum = costs.inner * box.half_area();
     for (int c = 0; c < N; ++c) {
         if (node.is_empty(c)) continue;
+        const BBox child = child_box(node, c);
         if (!node.is_leaf(c)) {
-            sum += top_cost(bvh, node.child[c], child_box(node, c), costs);
-            continue;
+            sum += world_cost(bvh, node.child[c], child, costs);
+        } else if (node.count[c] & TwoLevelBvh<N>::kInstanceEntries) {
+            const uint32_t first = node.child[c], end = first + (node.count[c] & ~TwoLevelBvh<N>::kInstanceEntries);
+            for (uint32_t i = first; i < end; ++i) sum += entry_cost(bvh, bvh.entries[i], child, costs);
+        } else {
+            sum += costs.triangle * double(node.count[c]) * child.half_area();
         }
-        for (uint32_t i = node.child[c]; i < node.child[c] + node.count[c]; ++i)
-            sum += object_cost(bvh, bvh.leaves[i], child_box(node, c), costs);
     }
     return sum;
 }
@@ -357,7 +442,7 @@ double top_cost(const TwoLevelBvh<N>& bvh, uint32_t index, const BBox& box, SahC
 template <int N>
 double sah_cost(const TwoLevelBvh<N>& bvh, SahCosts costs) {
     const double root = bvh.bounds.half_area();
-    return bvh.nodes.empty() || !(root > 0.0) ? 0.0 : top_cost(bvh, 0, bvh.bounds, costs) / root;
+    return bvh.brefs == 0 || !(root > 0.0) ? 0.0 : world_cost(bvh, bvh.root, bvh.bounds, costs) / root;
 }
 
 template double sah_cost<2>(const TwoLevelBvh<2>&, SahCosts);
