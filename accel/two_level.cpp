@@ -11,6 +11,8 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <numeric>
+#include <span>
 #include <stdexcept>
 #include <string>
 
@@ -80,14 +82,84 @@ BBox child_box(const auto& node, int c) {
 // A BVH node build reference (sec. 3.2): a node of an instance's object tree, its world bounds, and the
 // estimated number of triangles below it (the parent's divided by its child count, sec. 5.3).
 struct BRef {
+    static constexpr uint32_t kWholeLeaf = 0xffffffffu;
     BBox bounds;
     uint32_t instance;
-    uint32_t child, count;  // as WideNode names a child: count 0 is an inner node
+    uint32_t child, count;  // as WideNode names a child: count 0 is an inner node, count > 0 a leaf of that many
     float prims;
-    bool kept = false;  // refused opening (fewer_entries): stays closed in every segment below
+    uint32_t triangle = kWholeLeaf;  // of an opened leaf: the one triangle (of leaf child, count) referred to
+    bool kept = false;               // refused opening (fewer_entries): stays closed in every segment below
 
-    bool openable() const { return count == 0 && !kept; }
+    bool one_triangle() const { return triangle != kWholeLeaf; }
+    // Inner nodes, and leaves of several triangles (the paper opens inner nodes only; sec. 7 leaves leaves to
+    // future work).
+    bool openable() const { return !kept && !one_triangle() && count != 1; }
 };
+
+// BBox::extend written out, which the top level's hot loops then inline.
+[[gnu::always_inline]] inline void grow(BBox& box, const BBox& b) {
+    for (int a = 0; a < 3; ++a) {
+        box.lower[a] = std::min(box.lower[a], b.lower[a]);
+        box.upper[a] = std::max(box.upper[a], b.upper[a]);
+    }
+}
+
+struct PlacedTriangle {
+    Triangle triangle;
+    uint32_t prim;
+};
+
+// Triangle i of the leaf starting at pool leaf entry `first`, with the id its leaf holds.
+inline PlacedTriangle leaf_triangle(const LeafTriangle* leaves, uint32_t first, uint32_t i) {
+    const LeafTriangle& t = leaves[first + i];
+    return {{t.v0, t.v1, t.v2}, t.prim};
+}
+
+template <int W>
+PlacedTriangle leaf_triangle(const TriangleBlock<W>* blocks, uint32_t first, uint32_t i) {
+    const TriangleBlock<W>& block = blocks[first + i / W];
+    const uint32_t lane = i % W;
+    Vec3 v[3];
+    for (int vertex = 0; vertex < 3; ++vertex)
+        for (int a = 0; a < 3; ++a) v[vertex][a] = block.v[vertex][a][lane];
+    return {{v[0], v[1], v[2]}, block.prim[lane]};
+}
+
+// The triangle of a one-triangle BRef in world space, with its scene-wide id: what the top level's own leaf holds.
+template <int N>
+PlacedTriangle world_triangle(const TwoLevelBvh<N>& bvh, const BRef& r) {
+    PlacedTriangle t = leaf_triangle(bvh.pool.leaves.data(), r.child, r.triangle);
+    const PlacedObject& placed = bvh.instances[r.instance];
+    t.prim += placed.prim_offset;
+    if (!placed.identity) {
+        const glm::mat4& m = bvh.to_world[r.instance];
+        for (Vec3* v : {&t.triangle.v0, &t.triangle.v1, &t.triangle.v2}) *v = Vec3(m * glm::vec4(*v, 1.0f));
+    }
+    return t;
+}
+
+// Appends a leaf of the given triangles to `leaves`: LeafTriangles, or blocks whose lanes past the last triangle
+// hold a degenerate triangle at the origin (never hit), as collapse fills an object's leaves.
+inline void append_leaf(std::vector<LeafTriangle, HugePageAllocator<LeafTriangle>>& leaves,
+                        std::span<const PlacedTriangle> triangles) {
+    for (const PlacedTriangle& t : triangles) leaves.push_back({t.triangle.v0, t.prim, t.triangle.v1, t.triangle.v2});
+}
+
+template <int W>
+void append_leaf(std::vector<TriangleBlock<W>, HugePageAllocator<TriangleBlock<W>>>& blocks,
+                 std::span<const PlacedTriangle> triangles) {
+    for (size_t first = 0; first < triangles.size(); first += W) {
+        TriangleBlock<W>& block = blocks.emplace_back();
+        for (size_t lane = 0; lane < W; ++lane) {
+            const bool used = first + lane < triangles.size();
+            const Triangle t = used ? triangles[first + lane].triangle : Triangle{Vec3(0), Vec3(0), Vec3(0)};
+            const Vec3* vertices[3] = {&t.v0, &t.v1, &t.v2};
+            for (int v = 0; v < 3; ++v)
+                for (int a = 0; a < 3; ++a) block.v[v][a][lane] = (*vertices[v])[a];
+            block.prim[lane] = used ? triangles[first + lane].prim : TriangleBlock<W>::kNone;
+        }
+    }
+}
 
 // Sec. 5.2: objects get #instances + max(#instances, #triangles / 1000) BRefs, instanced objects 4 x #instances.
 size_t bref_capacity(const std::vector<ObjectTree>& objects, const std::vector<TwoLevelInstance>& instances,
@@ -150,7 +222,7 @@ private:
         if (open) open = worth_opening(s);
         if (open) s.end = open_wide_brefs(s);
         const BBox bounds = bounds_of(s);
-        if (s.end - s.begin == 1) return nodes_.set_leaf(node, bounds, s.begin, 1);
+        if (s.end - s.begin == 1 || triangle_leaf(s, bounds)) return nodes_.set_leaf(node, bounds, s.begin, s.end - s.begin);
         const uint32_t mid = partition(s, depth);
         const auto [left, right] = share_free_space(s, mid);
         const auto [left_descendants, right_descendants] =
@@ -178,36 +250,68 @@ private:
         return false;
     }
 
-    // Sec. 4.2 and 5.3: every inner BRef wider than open_extent of the segment's largest extent is replaced by
-    // its children: the first in its slot, the others appended while the segment's free space lasts.
+    // Sec. 4.2 and 5.3: every openable BRef wider than open_extent of the segment's largest extent is replaced by
+    // its children: the first in its slot, the others appended while the segment's free space lasts. The widest
+    // go first (sec. 7 suggests prioritising by size): with the space of sec. 5.2, taking them in array order left
+    // crytek-sponza at 1.07x flat, widest first at 1.00x.
     uint32_t open_wide_brefs(const Segment& s) {
         const BBox bounds = bounds_of(s);
         const int dim = bounds.largest_axis();
         const float threshold = settings_.open_extent * bounds.extent()[dim];
+        BRef* first = brefs_.data() + s.begin;
+        BRef* wide_end = std::partition(first, brefs_.data() + s.end, [&](const BRef& r) {
+            return r.openable() && r.bounds.extent()[dim] > threshold;
+        });
+        std::sort(first, wide_end, [&](const BRef& a, const BRef& b) {
+            const float ea = a.bounds.extent()[dim], eb = b.bounds.extent()[dim];
+            return ea != eb ? ea > eb : ordered(a, b, dim);
+        });
         uint32_t end = s.end;
-        for (uint32_t i = s.begin; i < s.end; ++i) {
-            BRef& parent = brefs_[i];
-            if (!parent.openable() || !(parent.bounds.extent()[dim] > threshold)) continue;
-            const WideNode<N>& node = bvh_.pool.nodes[parent.child];
-            uint32_t children = 0;
-            for (int c = 0; c < N; ++c) children += !node.is_empty(c);
-            if (end + children - 1 > s.extra_end) break;  // out of space: the rest stay closed
-            if (!fewer_entries(parent, node)) {
-                parent.kept = true;
-                continue;
-            }
-            const float prims = parent.prims / float(children);
-            const uint32_t instance = parent.instance;
-            bool first = true;
-            for (int c = 0; c < N; ++c) {
-                if (node.is_empty(c)) continue;
-                const BRef child{world_bounds(instance, node.child[c], node.count[c], child_box(node, c)), instance,
-                                 node.child[c], node.count[c], estimated_prims(node, c, prims)};
-                brefs_[first ? i : end++] = child;  // the first child takes the parent's slot
-                first = false;
-            }
+        for (uint32_t i = s.begin; i < uint32_t(wide_end - brefs_.data()); ++i) {
+            const bool opened = brefs_[i].count ? open_leaf(i, end, s.extra_end) : open_node(i, end, s.extra_end);
+            if (!opened) break;  // out of space: the rest stay closed
         }
         return end;
+    }
+
+    // Replaces inner BRef i by its children, the first in its slot, the others at `end`; false when they do not
+    // fit before `limit`.
+    bool open_node(uint32_t i, uint32_t& end, uint32_t limit) {
+        BRef& parent = brefs_[i];
+        const WideNode<N>& node = bvh_.pool.nodes[parent.child];
+        uint32_t children = 0;
+        for (int c = 0; c < N; ++c) children += !node.is_empty(c);
+        if (end + children - 1 > limit) return false;
+        if (!fewer_entries(parent, node)) {
+            parent.kept = true;
+            return true;
+        }
+        const float prims = parent.prims / float(children);
+        const uint32_t instance = parent.instance;
+        bool first = true;
+        for (int c = 0; c < N; ++c) {
+            if (node.is_empty(c)) continue;
+            const BRef child{world_bounds(instance, node.child[c], node.count[c], child_box(node, c)), instance,
+                             node.child[c], node.count[c], estimated_prims(node, c, prims)};
+            brefs_[first ? i : end++] = child;  // the first child takes the parent's slot
+            first = false;
+        }
+        return true;
+    }
+
+    // Opening a leaf (our extension, after sec. 7): a BRef per triangle, boxed in world space. The top level then
+    // sorts an object's triangles among other objects' as a single BVH would: on crytek-sponza, objects of a few
+    // huge triangles (the outer walls, spanning the whole scene) otherwise make leaves whose boxes every ray enters.
+    // The triangles reach the top level's own leaves in world space (pool_top_level), needing no entry.
+    bool open_leaf(uint32_t i, uint32_t& end, uint32_t limit) {
+        const BRef parent = brefs_[i];
+        if (end + parent.count - 1 > limit) return false;
+        for (uint32_t t = 0; t < parent.count; ++t) {
+            BRef one{BBox{}, parent.instance, parent.child, parent.count, 1.0f, t};
+            one.bounds = BBox::of(world_triangle(bvh_, one).triangle);
+            brefs_[t == 0 ? i : end++] = one;
+        }
+        return true;
     }
 
     // Opening a BRef that traversal reaches through an instance entry (a transformed placement) trades one entry,
@@ -231,7 +335,7 @@ private:
 
     BBox bounds_of(const Segment& s) const {
         BBox b;
-        for (uint32_t i = s.begin; i < s.end; ++i) b.extend(brefs_[i].bounds);
+        for (uint32_t i = s.begin; i < s.end; ++i) grow(b, brefs_[i].bounds);
         return b;
     }
 
@@ -245,78 +349,109 @@ private:
         int best_axis = -1, best_bin = 0;
         float best_cost = INFINITY;
         for (int axis = 0; axis < 3 && depth < kMedianFallbackDepth; ++axis) {
-            const float extent = centroids.extent()[axis];
-            if (!(extent > 0.0f)) continue;
+            if (!(centroids.extent()[axis] > 0.0f)) continue;
+            const Binning bin(centroids, axis, bins);
             std::array<BBox, kMaxTopLevelBins> box;
             std::array<float, kMaxTopLevelBins> weight{}, right_cost{};
             for (uint32_t i = s.begin; i < s.end; ++i) {
-                const int b = bin_of(brefs_[i], centroids, axis, bins);
-                box[size_t(b)].extend(brefs_[i].bounds);
+                const int b = bin(brefs_[i]);
+                grow(box[size_t(b)], brefs_[i].bounds);
                 weight[size_t(b)] += brefs_[i].prims;
             }
             BBox right;
             float right_weight = 0.0f;
             for (int b = bins - 1; b > 0; --b) {
-                right.extend(box[size_t(b)]), right_weight += weight[size_t(b)];
+                grow(right, box[size_t(b)]), right_weight += weight[size_t(b)];
                 right_cost[size_t(b)] = right.half_area() * right_weight;
             }
             BBox left;
             float left_weight = 0.0f;
             for (int b = 1; b < bins; ++b) {
-                left.extend(box[size_t(b - 1)]), left_weight += weight[size_t(b - 1)];
+                grow(left, box[size_t(b - 1)]), left_weight += weight[size_t(b - 1)];
                 const float cost = left.half_area() * left_weight + right_cost[size_t(b)];
                 if (left_weight > 0.0f && right_cost[size_t(b)] > 0.0f && cost < best_cost)
                     best_cost = cost, best_axis = axis, best_bin = b;
             }
         }
         if (best_axis < 0) return median_split(s, centroids);
-        BRef* first = brefs_.data() + s.begin;
-        BRef* mid = std::partition(first, brefs_.data() + s.end, [&](const BRef& r) {
-            return bin_of(r, centroids, best_axis, bins) < best_bin;
-        });
+        const Binning bin(centroids, best_axis, bins);
+        BRef* mid = std::partition(brefs_.data() + s.begin, brefs_.data() + s.end,
+                                   [&](const BRef& r) { return bin(r) < best_bin; });
         return uint32_t(mid - brefs_.data());
     }
 
-    static int bin_of(const BRef& r, const BBox& centroids, int axis, int bins) {
-        const float scale = float(bins) * (1.0f - 1e-6f) / centroids.extent()[axis];
-        return std::clamp(int((r.bounds.center()[axis] - centroids.lower[axis]) * scale), 0, bins - 1);
-    }
+    // A BRef's bin along one axis of the segment's centroid box.
+    struct Binning {
+        int axis, bins;
+        float lower, scale;
+        Binning(const BBox& centroids, int a, int n)
+            : axis(a), bins(n), lower(centroids.lower[a]), scale(float(n) * (1.0f - 1e-6f) / centroids.extent()[a]) {}
+        int operator()(const BRef& r) const { return std::clamp(int((r.bounds.center()[axis] - lower) * scale), 0, bins - 1); }
+    };
 
     // The same SAH over every split of the centroid order on each axis: exact, and for a handful of BRefs cheaper
     // than filling the bins. Ties in the order go by instance and node, so the split is the same on every run.
     uint32_t sweep_partition(const Segment& s) {
+        const Sweep best = sweep(s, [](uint32_t, float prims) { return prims; });
+        std::sort(brefs_.begin() + s.begin, brefs_.begin() + s.end,
+                  [&](const BRef& a, const BRef& b) { return ordered(a, b, best.axis); });
+        return s.begin + best.split;
+    }
+
+    struct Sweep {
+        int axis = 0;
+        uint32_t split = 1;  // BRefs on the left
+        float cost = INFINITY;
+    };
+
+    // The split of the segment's centroid order, on any axis, of least area(left) weight(left) + area(right)
+    // weight(right), a side's weight being weigh(BRefs, summed triangle estimates).
+    template <class Weigh>
+    Sweep sweep(const Segment& s, Weigh&& weigh) const {
         const uint32_t n = s.end - s.begin;
-        std::array<BRef, kSweepUpTo> sorted;
+        std::array<uint32_t, kSweepUpTo> order;
         std::array<float, kSweepUpTo> right_cost;
-        int best_axis = 0;
-        uint32_t best_split = 1;
-        float best_cost = INFINITY;
+        Sweep best;
         for (int axis = 0; axis < 3; ++axis) {
-            std::copy(brefs_.begin() + s.begin, brefs_.begin() + s.end, sorted.begin());
-            std::sort(sorted.begin(), sorted.begin() + n, [&](const BRef& a, const BRef& b) { return ordered(a, b, axis); });
+            std::iota(order.begin(), order.begin() + n, s.begin);
+            std::sort(order.begin(), order.begin() + n,
+                      [&](uint32_t a, uint32_t b) { return ordered(brefs_[a], brefs_[b], axis); });
             BBox right;
-            float right_weight = 0.0f;
+            float right_prims = 0.0f;
             for (uint32_t i = n - 1; i > 0; --i) {
-                right.extend(sorted[i].bounds), right_weight += sorted[i].prims;
-                right_cost[i] = right.half_area() * right_weight;
+                grow(right, brefs_[order[i]].bounds), right_prims += brefs_[order[i]].prims;
+                right_cost[i] = right.half_area() * weigh(n - i, right_prims);
             }
             BBox left;
-            float left_weight = 0.0f;
+            float left_prims = 0.0f;
             for (uint32_t i = 1; i < n; ++i) {
-                left.extend(sorted[i - 1].bounds), left_weight += sorted[i - 1].prims;
-                const float cost = left.half_area() * left_weight + right_cost[i];
-                if (cost < best_cost) best_cost = cost, best_axis = axis, best_split = i;
+                grow(left, brefs_[order[i - 1]].bounds), left_prims += brefs_[order[i - 1]].prims;
+                const float cost = left.half_area() * weigh(i, left_prims) + right_cost[i];
+                if (cost < best.cost) best = {axis, i, cost};
             }
         }
-        std::sort(brefs_.begin() + s.begin, brefs_.begin() + s.end,
-                  [&](const BRef& a, const BRef& b) { return ordered(a, b, best_axis); });
-        return s.begin + best_split;
+        return best;
+    }
+
+    // A segment of opened leaves' triangles only, few enough for one leaf, becomes one when the SAH of the object
+    // builder's costs says so (against splitting it once into two leaves): the top level's leaf then mixes
+    // triangles of several objects, as a flat BVH's leaves do.
+    bool triangle_leaf(const Segment& s, const BBox& bounds) const {
+        const uint32_t n = s.end - s.begin;
+        if (n > leaf_limit_) return false;
+        for (uint32_t i = s.begin; i < s.end; ++i)
+            if (!brefs_[i].one_triangle()) return false;
+        const BuildSettings& b = settings_.blas;
+        const Sweep split = sweep(s, [&](uint32_t count, float) { return b.leaf_tests(count); });
+        const float area = bounds.half_area();
+        return b.costs.triangle * b.leaf_tests(n) * area <= b.costs.inner * area + b.costs.triangle * split.cost;
     }
 
     static bool ordered(const BRef& a, const BRef& b, int axis) {
         const float ca = a.bounds.center()[axis], cb = b.bounds.center()[axis];
         if (ca != cb) return ca < cb;
-        return a.instance != b.instance ? a.instance < b.instance : a.child != b.child ? a.child < b.child : a.count < b.count;
+        if (a.instance != b.instance) return a.instance < b.instance;
+        return a.child != b.child ? a.child < b.child : a.count != b.count ? a.count < b.count : a.triangle < b.triangle;
     }
 
     // All centroids in one point (or too deep): split in the middle of the largest axis's order.
@@ -344,11 +479,13 @@ private:
     const TwoLevelBvh<N>& bvh_;
     const std::vector<TwoLevelInstance>& instances_;
     const TwoLevelSettings& settings_;
+    // A top-level leaf of triangles is one block of the SIMD kernels, or as large as an object's leaf may be.
+    const uint32_t leaf_limit_ = std::min<uint32_t>(settings_.blas.max_leaf_size, N > 2 ? uint32_t(block_lanes(N)) : kSweepUpTo);
     std::vector<BRef> brefs_;
     SparseTree nodes_;
 };
 
-uint32_t one_entry_per_ref(int, uint32_t count) { return count; }
+uint32_t one_entry_per_leaf(int, uint32_t) { return 1; }
 
 void offset_prims(LeafTriangle& leaf, uint32_t base) { leaf.prim += base; }
 
@@ -371,8 +508,8 @@ std::vector<uint32_t> prim_bases(const TwoLevelInput& input) {
 }
 
 // Copies every object's tree into the pool, in object order: node and leaf indices offset by where the tree
-// lands, triangle ids by the object's prim_base. Each tree is freed once copied. The node array keeps room for
-// `top_nodes` more, so that appending the top level does not move the object trees.
+// lands, triangle ids by the object's prim_base. Each tree is freed once copied. Both arrays keep room for
+// `top_nodes` more, so that appending the top level and its leaves does not move the object trees.
 template <int N>
 void pool_object_trees(TwoLevelBvh<N>& bvh, std::vector<WideBvh<N>>& trees, size_t top_nodes) {
     std::vector<uint32_t> first_leaf(trees.size());
@@ -381,9 +518,10 @@ void pool_object_trees(TwoLevelBvh<N>& bvh, std::vector<WideBvh<N>>& trees, size
         bvh.objects[o].root = nodes, first_leaf[o] = leaves;
         nodes += uint32_t(trees[o].nodes.size()), leaves += uint32_t(trees[o].leaves.size());
     }
-    bvh.object_nodes = nodes;
+    bvh.object_nodes = nodes, bvh.object_leaves = leaves;
     bvh.pool.nodes.reserve(nodes + top_nodes);
     bvh.pool.nodes.resize(nodes);
+    bvh.pool.leaves.reserve(leaves + top_nodes);
     bvh.pool.leaves.resize(leaves);
     parallel::for_each(trees.size(), 1, [&](size_t o) {
         const uint32_t node_base = bvh.objects[o].root, leaf_base = first_leaf[o];
@@ -401,8 +539,9 @@ void pool_object_trees(TwoLevelBvh<N>& bvh, std::vector<WideBvh<N>>& trees, size
     });
 }
 
-// Appends the collapsed top level to the pool after the object trees. Its leaves hold one BRef each: a BRef of a
-// direct() placement becomes the child itself, any other an entry.
+// Appends the collapsed top level to the pool after the object trees. A leaf of it holds one BRef, or several
+// triangles of opened leaves. A BRef of a direct() placement becomes the child itself, triangles a leaf of the
+// top level's own (after the objects' leaves, in world space), any other BRef an entry.
 template <int N>
 void pool_top_level(TwoLevelBvh<N>& bvh, const WideNodes<N>& top, const std::vector<LeafRun>& runs,
                     const std::vector<BRef>& brefs) {
@@ -419,8 +558,14 @@ void pool_top_level(TwoLevelBvh<N>& bvh, const WideNodes<N>& top, const std::vec
                 node.child[c] += base;
                 continue;
             }
-            const BRef& r = brefs[runs[node.child[c]].first_ref];  // collapse numbers one-BRef leaves in run order
-            if (bvh.instances[r.instance].direct()) {
+            const LeafRun& run = runs[node.child[c]];  // one entry a leaf: collapse numbers leaves in run order
+            const BRef& r = brefs[run.first_ref];
+            if (r.one_triangle()) {
+                std::array<PlacedTriangle, kSweepUpTo> triangles;
+                for (uint32_t t = 0; t < run.count; ++t) triangles[t] = world_triangle(bvh, brefs[run.first_ref + t]);
+                node.child[c] = uint32_t(bvh.pool.leaves.size()), node.count[c] = run.count;
+                append_leaf(bvh.pool.leaves, std::span<const PlacedTriangle>(triangles.data(), run.count));
+            } else if (bvh.instances[r.instance].direct()) {
                 node.child[c] = r.child, node.count[c] = r.count;
             } else {
                 node.child[c] = uint32_t(bvh.entries.size()), node.count[c] = TwoLevelBvh<N>::kInstanceEntries | 1;
@@ -428,7 +573,8 @@ void pool_top_level(TwoLevelBvh<N>& bvh, const WideNodes<N>& top, const std::vec
             }
         }
     }
-    bvh.brefs = uint32_t(runs.size());
+    bvh.brefs = 0;
+    for (const LeafRun& run : runs) bvh.brefs += run.count;
     // Traversal prefetches pool.leaves[child] for every leaf child it pushes, an entry's too: such an index stays
     // inside the leaf array even in a scene with more entries than object leaves (the padding is never read).
     if (bvh.pool.leaves.size() < bvh.entries.size()) bvh.pool.leaves.resize(bvh.entries.size(), LeafOf<N>{});
@@ -448,6 +594,7 @@ void build_top_level(TwoLevelBvh<N>& bvh, const std::vector<TwoLevelInstance>& i
     for (size_t i = 0; i < instances.size(); ++i)
         bvh.instances[i] = place(instances[i], bvh.objects[instances[i].object]), bvh.to_world[i] = instances[i].to_world;
     bvh.pool.nodes.resize(bvh.object_nodes);
+    bvh.pool.leaves.resize(bvh.object_leaves);
     bvh.entries.clear();
     bvh.brefs = 0;
     bvh.bounds = BBox{};
@@ -460,7 +607,7 @@ void build_top_level(TwoLevelBvh<N>& bvh, const std::vector<TwoLevelInstance>& i
     bvh.bounds = top.nodes[0].bounds;
     WideNodes<N> nodes;
     uint32_t entries = 0;
-    const std::vector<LeafRun> runs = collapse_nodes<N>(top, nodes, &one_entry_per_ref, entries);
+    const std::vector<LeafRun> runs = collapse_nodes<N>(top, nodes, &one_entry_per_leaf, entries);
     pool_top_level(bvh, nodes, runs, builder.brefs());
 }
 

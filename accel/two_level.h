@@ -76,7 +76,8 @@ struct TopLevelRef {
 
 // Every object tree and the top level share one node array and one leaf array, object trees first. A top-level
 // child is one of: a top-level node; an object node or object leaf, reached with the world ray as any child is
-// (a BRef of a direct() placement: sec. 5.5, the structure a plain BVH traversal walks); or, flagged by
+// (a BRef of a direct() placement: sec. 5.5, the structure a plain BVH traversal walks); a leaf of the top level's
+// own, holding triangles of opened object leaves in world space with scene-wide ids; or, flagged by
 // kInstanceEntries in its count, a run of TopLevelRefs in `entries` that need the instance's ray.
 template <int N>
 struct TwoLevelBvh {
@@ -85,6 +86,7 @@ struct TwoLevelBvh {
     WideBvh<N> pool;
     uint32_t root = 0;          // the top level's root in pool.nodes
     uint32_t object_nodes = 0;  // pool.nodes before this index are object trees'
+    uint32_t object_leaves = 0;  // pool.leaves likewise; after them, the top level's leaves of opened triangles
     std::vector<ObjectTree> objects;
     std::vector<PlacedObject> instances;
     std::vector<glm::mat4> to_world;  // per instance, for metrics (traversal only needs the inverse)
