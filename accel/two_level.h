@@ -35,12 +35,17 @@ struct TwoLevelSettings {
     uint32_t bins = 32;
 };
 
-// The ray's way into an instance: world to object space, or nothing for an identity placement.
+// The ray's way into an instance: world to object space, or nothing for an identity placement. prim_offset is
+// added to the ids of triangles hit through this instance (its object's leaves hold ids offset by their
+// ObjectTree::prim_base already).
 struct PlacedObject {
     uint32_t object = 0;
     uint32_t prim_offset = 0;
     bool identity = true;
     float world_to_object[3][4] = {};  // rows of the affine inverse
+
+    // Identity placement with nothing to add: the top level may point straight into the object's tree.
+    bool direct() const { return identity && prim_offset == 0; }
 
     Vec3 point(const Vec3& p) const {
         return {world_to_object[0][0] * p.x + world_to_object[0][1] * p.y + world_to_object[0][2] * p.z + world_to_object[0][3],
@@ -54,24 +59,43 @@ struct PlacedObject {
     }
 };
 
+// An object's tree inside TwoLevelBvh::pool.
+struct ObjectTree {
+    uint32_t root = 0;       // its root node in pool.nodes
+    uint32_t triangles = 0;
+    uint32_t prim_base = 0;  // added to the object's triangle ids in its leaves: its first identity placement's offset
+    BBox bounds;             // in object space
+};
+
 // A top-level leaf entry: a node (count 0) or leaf (count > 0) of an instance's object tree, as WideNode names
-// its children, so traversal can enter the object tree there.
+// its children, so traversal can enter the object tree there with the instance's ray.
 struct TopLevelRef {
     uint32_t instance;
     uint32_t child, count;
 };
 
+// Every object tree and the top level share one node array and one leaf array, object trees first. A top-level
+// child is one of: a top-level node; an object node or object leaf, reached with the world ray as any child is
+// (a BRef of a direct() placement: sec. 5.5, the structure a plain BVH traversal walks); a leaf of the top level's
+// own, holding triangles of opened object leaves in world space with scene-wide ids; or, flagged by
+// kInstanceEntries in its count, a run of TopLevelRefs in `entries` that need the instance's ray.
 template <int N>
 struct TwoLevelBvh {
     static constexpr int kWidth = N;
-    std::vector<WideBvh<N>> objects;
+    static constexpr uint32_t kInstanceEntries = 0x80000000u;
+    WideBvh<N> pool;
+    uint32_t root = 0;          // the top level's root in pool.nodes
+    uint32_t object_nodes = 0;  // pool.nodes before this index are object trees'
+    uint32_t object_leaves = 0;  // pool.leaves likewise; after them, the top level's leaves of opened triangles
+    std::vector<ObjectTree> objects;
     std::vector<PlacedObject> instances;
     std::vector<glm::mat4> to_world;  // per instance, for metrics (traversal only needs the inverse)
-    WideNodes<N> nodes;              // the top level; each of its leaves holds one TopLevelRef
-    std::vector<TopLevelRef> leaves;
+    std::vector<TopLevelRef> entries;
+    uint32_t brefs = 0;  // the top level's references: direct children and entries
     BBox bounds;
 
-    uint64_t bytes() const;  // top level, object trees once each, instances
+    uint32_t top_level_nodes() const { return uint32_t(pool.nodes.size()) - object_nodes; }
+    uint64_t bytes() const;  // pool, entries, instances
 };
 
 struct TwoLevelTimes {

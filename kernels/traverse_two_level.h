@@ -1,8 +1,10 @@
 #pragma once
-// Traversal of a two-level BVH in every kernel width: the top level with the world ray; at each of its leaves
-// the ray enters the referenced object tree at that node (a re-braided top level points below object roots),
-// transformed into the instance's object space unless the instance is placed by the identity. A ray may thus be
-// transformed into the same instance several times, which the paper finds cheaper than avoiding it (sec. 5.5).
+// Traversal of a two-level BVH in every kernel width. The top level and the object trees share one pool
+// (accel/two_level.h), so the world ray walks top-level nodes and directly linked object subtrees in one loop, as
+// it would a single BVH (sec. 5.5). A top-level leaf flagged as instance entries enters an instance's object tree
+// at the referenced node, with the ray transformed into the instance's object space unless the placement is the
+// identity. A ray may thus be transformed into the same instance several times, which the paper finds cheaper
+// than avoiding it (sec. 5.5).
 #include "accel/two_level.h"
 #include "kernels/traverse.h"
 
@@ -11,15 +13,39 @@ namespace detail {
 
 // Traverses one object tree from `entry` with a ray already in its space; true when it recorded a hit.
 template <Query Q, bool Robust, class TriangleTest, int N, class Counter>
-bool enter_object(const WideBvh<N>& object, const TopLevelRef& entry, const SlabRay<N>& box_ray,
+bool enter_object(const WideBvh<N>& pool, const TopLevelRef& entry, const SlabRay<N>& box_ray,
                   const TriangleTest& tri_ray, float tmin, Hit& hit, Counter& counter) {
     bool found = false;
-    traverse_from<Q, Robust>(object, {entry.child, entry.count, tmin}, box_ray, tmin, hit, counter,
+    traverse_from<Q, Robust>(pool, {entry.child, entry.count, tmin}, box_ray, tmin, hit, counter,
                              [&](const StackEntry& leaf) {
-                                 const bool here = intersect_leaf(object, leaf, tri_ray, tmin, hit, counter);
+                                 const bool here = intersect_leaf(pool, leaf, tri_ray, tmin, hit, counter);
                                  found |= here;
                                  return here;
                              });
+    return found;
+}
+
+// The top-level leaf `leaf`, a run of instance entries: each entered with the ray in its instance's space.
+template <Query Q, bool Robust, class TriangleTest, int N, class Counter>
+[[gnu::noinline]] bool enter_instances(const TwoLevelBvh<N>& bvh, const StackEntry& leaf, const Ray& ray, const SlabRay<N>& world_box,
+                     const TriangleTest& world_tri, Hit& hit, Counter& counter) {
+    bool found = false;
+    const uint32_t end = leaf.child + (leaf.count & ~TwoLevelBvh<N>::kInstanceEntries);
+    for (uint32_t i = leaf.child; i < end; ++i) {
+        const TopLevelRef& entry = bvh.entries[i];
+        const PlacedObject& instance = bvh.instances[entry.instance];
+        bool here;
+        if (instance.identity) {
+            here = enter_object<Q, Robust>(bvh.pool, entry, world_box, world_tri, ray.tmin, hit, counter);
+        } else {
+            // Direction is not renormalised, so distances along the ray stay world distances.
+            const Ray local{instance.point(ray.org), instance.vector(ray.dir), ray.tmin, hit.t};
+            here = enter_object<Q, Robust>(bvh.pool, entry, SlabRay<N>(local), TriangleTest(local), ray.tmin, hit, counter);
+        }
+        if (here) hit.prim += instance.prim_offset;
+        found |= here;
+        if (found && Q == Query::Any) return true;
+    }
     return found;
 }
 
@@ -29,30 +55,14 @@ template <Query Q, bool Robust = true, class TriangleTest = WatertightRay, int N
 bool traverse(const TwoLevelBvh<N>& bvh, const Ray& ray, Hit& hit, Counter&& counter = {}) {
     hit = Hit{};
     hit.t = ray.tmax;
-    if (bvh.nodes.empty()) return false;
+    if (bvh.brefs == 0) return false;
     const detail::SlabRay<N> world_box(ray);
     const TriangleTest world_tri(ray);
-    detail::traverse_from<Q, Robust>(bvh, {0, 0, ray.tmin}, world_box, ray.tmin, hit, counter,
-                                     [&](const detail::StackEntry& leaf) {
-        bool found = false;
-        for (uint32_t i = leaf.child; i < leaf.child + leaf.count; ++i) {
-            const TopLevelRef& entry = bvh.leaves[i];
-            const PlacedObject& instance = bvh.instances[entry.instance];
-            const WideBvh<N>& object = bvh.objects[instance.object];
-            bool here;
-            if (instance.identity) {
-                here = detail::enter_object<Q, Robust>(object, entry, world_box, world_tri, ray.tmin, hit, counter);
-            } else {
-                // Direction is not renormalised, so distances along the ray stay world distances.
-                const Ray local{instance.point(ray.org), instance.vector(ray.dir), ray.tmin, hit.t};
-                here = detail::enter_object<Q, Robust>(object, entry, detail::SlabRay<N>(local), TriangleTest(local),
-                                                       ray.tmin, hit, counter);
-            }
-            if (here) hit.prim += instance.prim_offset;
-            found |= here;
-            if (found && Q == Query::Any) return true;
-        }
-        return found;
+    detail::traverse_from<Q, Robust>(bvh.pool, {bvh.root, 0, ray.tmin}, world_box, ray.tmin, hit,
+                                     counter, [&](const detail::StackEntry& leaf) {
+        if (leaf.count & TwoLevelBvh<N>::kInstanceEntries)
+            return detail::enter_instances<Q, Robust>(bvh, leaf, ray, world_box, world_tri, hit, counter);
+        return detail::intersect_leaf(bvh.pool, leaf, world_tri, ray.tmin, hit, counter);  // a directly linked leaf
     });
     return hit.found();
 }

@@ -202,8 +202,8 @@ private:
             if constexpr (is_two_level<Layout>) {
                 r.layout_sah = sah_cost(bvh);
                 r.bytes = bvh.bytes();
-                r.nodes = bvh.nodes.size();
-                r.brefs = r.leaves = bvh.leaves.size();
+                r.nodes = bvh.top_level_nodes();
+                r.brefs = r.leaves = bvh.brefs;
             }
         }, layout_);
         return r;

@@ -55,11 +55,11 @@ TEST_CASE("the re-braided top level is the same with 1 and 2 threads", "[two-lev
         return build_two_level<4>(input, TwoLevelSettings{});
     };
     const TwoLevelBvh<4> one = build(1), two = build(2);
-    REQUIRE(one.nodes.size() == two.nodes.size());
-    REQUIRE(one.leaves.size() == two.leaves.size());
-    CHECK(one.leaves.size() > input.instances.size());  // overlapping instances were opened
-    CHECK(std::memcmp(one.nodes.data(), two.nodes.data(), one.nodes.size() * sizeof(WideNode<4>)) == 0);
-    CHECK(std::memcmp(one.leaves.data(), two.leaves.data(), one.leaves.size() * sizeof(TopLevelRef)) == 0);
+    REQUIRE(one.pool.nodes.size() == two.pool.nodes.size());
+    REQUIRE(one.entries.size() == two.entries.size());
+    CHECK(one.brefs > input.instances.size());  // overlapping instances were opened
+    CHECK(std::memcmp(one.pool.nodes.data(), two.pool.nodes.data(), one.pool.nodes.size() * sizeof(WideNode<4>)) == 0);
+    CHECK(std::memcmp(one.entries.data(), two.entries.data(), one.entries.size() * sizeof(TopLevelRef)) == 0);
 }
 
 TEST_CASE("re-braiding lowers the SAH of the plain two-level top level", "[two-level]") {
