@@ -2,93 +2,183 @@
 #include "accel/parallel.h"
 
 #include <array>
+#include <bit>
+#include <memory>
 
 namespace canopy {
 namespace {
 
+// What a wide subtree takes of the output arrays: wide nodes (its root included), leaf entries, and leaves.
+struct Extent {
+    uint32_t nodes, entries, leaves;
+};
+
+// Where a wide subtree's next node slot, leaf entry and leaf go.
+using Cursor = Extent;
+
+// A wide node's children as binary nodes (Ganestam and Doggett 2016, sec. 4.2): the binary node's two children,
+// then repeatedly the inner child of largest surface area replaced by its two children until there are N.
 template <int N>
-class Collapser {
-public:
-    Collapser(const Bvh& bvh, WideNodes<N>& nodes, uint32_t (*entries)(int, uint32_t))
-        : bvh_(bvh), nodes_(nodes), entries_(entries) {}
+struct WideChildren {
+    std::array<uint32_t, N> node;
+    int count = 0;
 
-    // Writes every node; returns the leaves in emission order, for filling WideBvh::leaves in parallel.
-    std::vector<LeafRun> run() {
-        nodes_.resize(1);
-        if (bvh_.nodes[0].is_leaf()) {
-            const uint32_t lone[1] = {0};
-            emit(0, std::span<const uint32_t>(lone, 1));
-        } else {
-            emit_children_of(0, 0);
-        }
-        return std::move(leaf_runs_);
-    }
-
-    uint32_t leaf_entries() const { return leaf_entries_; }
-
-private:
-    // Writes wide node `self`, whose children come from opening binary node `index`.
-    void emit_children_of(uint32_t index, uint32_t self) {
-        std::array<uint32_t, N> open{};
-        int n = 0;
-        open[n++] = bvh_.nodes[index].index;
-        open[n++] = bvh_.nodes[index].index + 1;
-        while (n < N) {
+    WideChildren(const Bvh& bvh, uint32_t index) {
+        std::array<float, N> area;  // half area of an inner child; -1 for a leaf, never opened
+        auto put = [&](int slot, uint32_t child) {
+            node[slot] = child;
+            area[slot] = bvh.nodes[child].is_leaf() ? -1.0f : bvh.nodes[child].bounds.half_area();
+        };
+        put(count++, bvh.nodes[index].index);
+        put(count++, bvh.nodes[index].index + 1);
+        while (count < N) {
             int widest = -1;
             float widest_area = -1.0f;
-            for (int i = 0; i < n; ++i) {
-                const BvhNode& c = bvh_.nodes[open[i]];
-                if (!c.is_leaf() && c.bounds.half_area() > widest_area) widest = i, widest_area = c.bounds.half_area();
-            }
+            for (int i = 0; i < count; ++i)
+                if (area[i] > widest_area) widest = i, widest_area = area[i];
             if (widest < 0) break;
-            const uint32_t first = bvh_.nodes[open[widest]].index;
-            open[widest] = first;
-            open[n++] = first + 1;
+            const uint32_t first = bvh.nodes[node[widest]].index;
+            put(widest, first);
+            put(count++, first + 1);
         }
-        emit(self, std::span<const uint32_t>(open.data(), size_t(n)));
+    }
+    // A root that is a leaf: one leaf child.
+    explicit WideChildren(uint32_t leaf) : count(1) { node[0] = leaf; }
+};
+
+// Collapses in two passes so that subtrees fill in parallel yet land exactly where the depth-first serial order
+// puts them: a node's inner children get consecutive slots, then each child's subtree follows in turn (siblings
+// sit next to each other as the traversal visits them), and leaf entries follow the same order. The first pass
+// measures every subtree's extent; the second writes, giving each large subtree its own cursor.
+template <int N, class LeafSink>
+class Collapser {
+public:
+    Collapser(const Bvh& bvh, WideNodes<N>& nodes, uint32_t (*entries)(int, uint32_t), LeafSink& sink)
+        : bvh_(bvh), nodes_(nodes), entries_(entries), sink_(sink),
+          extents_(std::make_unique_for_overwrite<Extent[]>(bvh.nodes.size())) {}
+
+    // Returns the extent of the whole tree, once the sink has been told where it goes (`reserve(extent)`).
+    Extent run() {
+        const bool lone_leaf = bvh_.nodes[0].is_leaf();
+        const Extent total = lone_leaf ? Extent{1, entries_(N, bvh_.nodes[0].count), 1} : measure(0, 0);
+        nodes_.clear();
+        nodes_.resize(total.nodes);
+        sink_.reserve(total);
+        Cursor at{1, 0, 0};
+        if (lone_leaf)
+            write_node(WideChildren<N>(0), 0, at);
+        else if (total.nodes >= kGrain)
+            fill_parallel(0, 0, at);
+        else
+            fill_serial(0, 0, at);
+        return total;
     }
 
-    // Writes the node at `self`: its inner children get consecutive slots first, then each is filled in
-    // turn, so siblings sit next to each other in memory as the traversal visits them.
-    void emit(uint32_t self, std::span<const uint32_t> children) {
-        for (int i = 0; i < N; ++i) set_empty(self, i);
-        uint32_t next = uint32_t(nodes_.size());
-        for (size_t i = 0; i < children.size(); ++i) {
-            const BvhNode& c = bvh_.nodes[children[i]];
-            set_box(self, int(i), c.bounds);
+private:
+    // Wide subtrees below this many nodes are filled by one task.
+    static constexpr uint32_t kGrain = 256;
+    // Wide levels whose children are measured concurrently: about 2^9 tasks at any width.
+    static constexpr uint32_t kMeasureDepth = 9 / std::bit_width(unsigned(N - 1));
+
+    // The extent of the wide subtree rooted at inner binary node `index`; keeps its inner children's extents
+    // where it is large enough for fill_parallel to need them.
+    Extent measure(uint32_t index, uint32_t depth) {
+        const WideChildren<N> children(bvh_, index);
+        std::array<Extent, N> extent;
+        auto measure_child = [&](size_t i) {
+            const BvhNode& c = bvh_.nodes[children.node[i]];
+            extent[i] = c.is_leaf() ? Extent{0, entries_(N, c.count), 1} : measure(children.node[i], depth + 1);
+        };
+        if (depth < kMeasureDepth)
+            parallel::for_each(size_t(children.count), 1, measure_child);
+        else
+            for (int i = 0; i < children.count; ++i) measure_child(size_t(i));
+        Extent total{1, 0, 0};
+        for (int i = 0; i < children.count; ++i) total = sum(total, extent[i]);
+        if (total.nodes >= kGrain)
+            for (int i = 0; i < children.count; ++i) extents_[children.node[i]] = extent[i];
+        return total;
+    }
+
+    // Writes the large wide subtree rooted at binary node `index` into slot `self`, its descendants from `at`:
+    // each inner child's subtree starts where its earlier siblings' extents end, so they fill concurrently.
+    void fill_parallel(uint32_t index, uint32_t self, Cursor at) {
+        const WideChildren<N> children(bvh_, index);
+        write_node(children, self, at);
+        std::array<Cursor, N> start;
+        for (int i = 0; i < children.count; ++i) {
+            if (nodes_[self].is_leaf(i)) continue;
+            start[i] = at;
+            const Extent& e = extents_[children.node[i]];
+            at = sum(at, Extent{e.nodes - 1, e.entries, e.leaves});  // its root took a slot in write_node
+        }
+        parallel::for_each(size_t(children.count), 1, [&](size_t i) {
+            if (nodes_[self].is_leaf(int(i))) return;
+            const uint32_t child = children.node[i], slot = nodes_[self].child[i];
+            Cursor cursor = start[i];
+            if (extents_[child].nodes >= kGrain)
+                fill_parallel(child, slot, cursor);
+            else
+                fill_serial(child, slot, cursor);
+        });
+    }
+
+    // Writes a small subtree in depth-first order, advancing `at`.
+    void fill_serial(uint32_t index, uint32_t self, Cursor& at) {
+        const WideChildren<N> children(bvh_, index);
+        write_node(children, self, at);
+        for (int i = 0; i < children.count; ++i)
+            if (!nodes_[self].is_leaf(i)) fill_serial(children.node[i], nodes_[self].child[i], at);
+    }
+
+    // Writes node `self`: inner children take the next node slots, leaf children the next entries.
+    void write_node(const WideChildren<N>& children, uint32_t self, Cursor& at) {
+        WideNode<N>& node = nodes_[self];
+        for (int i = 0; i < N; ++i) {
+            if (i >= children.count) {
+                set_box(node, i, BBox{});  // lower = +inf, upper = -inf: never hit
+                node.child[i] = WideNode<N>::kEmpty;
+                node.count[i] = 0;
+                continue;
+            }
+            const BvhNode& c = bvh_.nodes[children.node[i]];
+            set_box(node, i, c.bounds);
             if (c.is_leaf()) {
-                nodes_[self].child[i] = leaf_entries_;
-                nodes_[self].count[i] = c.count;
-                leaf_runs_.push_back({leaf_entries_, c.index, c.count});
-                leaf_entries_ += entries_(N, c.count);
+                node.child[i] = at.entries;
+                node.count[i] = c.count;
+                sink_(at.leaves, LeafRun{at.entries, c.index, c.count});
+                at.entries += entries_(N, c.count);
+                ++at.leaves;
             } else {
-                nodes_[self].child[i] = next++;
-                nodes_[self].count[i] = 0;
+                node.child[i] = at.nodes++;
+                node.count[i] = 0;
             }
         }
-        nodes_.resize(next);
-        for (size_t i = 0; i < children.size(); ++i)
-            if (!bvh_.nodes[children[i]].is_leaf()) emit_children_of(children[i], nodes_[self].child[i]);
     }
 
-    void set_box(uint32_t node, int i, const BBox& box) {
+    static void set_box(WideNode<N>& node, int i, const BBox& box) {
         for (int a = 0; a < 3; ++a) {
-            nodes_[node].lower(a, i) = box.lower[a];
-            nodes_[node].upper(a, i) = box.upper[a];
+            node.lower(a, i) = box.lower[a];
+            node.upper(a, i) = box.upper[a];
         }
     }
 
-    void set_empty(uint32_t node, int i) {
-        set_box(node, i, BBox{});  // lower = +inf, upper = -inf
-        nodes_[node].child[i] = WideNode<N>::kEmpty;
-        nodes_[node].count[i] = 0;
+    static Extent sum(const Extent& a, const Extent& b) {
+        return {a.nodes + b.nodes, a.entries + b.entries, a.leaves + b.leaves};
     }
 
     const Bvh& bvh_;
     WideNodes<N>& nodes_;
     uint32_t (*entries_)(int, uint32_t);
-    std::vector<LeafRun> leaf_runs_;
-    uint32_t leaf_entries_ = 0;
+    LeafSink& sink_;
+    std::unique_ptr<Extent[]> extents_;  // by binary node; written only for children of large subtrees
+};
+
+// Keeps the leaves in emission order, for a caller whose leaves hold something else than triangles.
+struct RunList {
+    std::vector<LeafRun> runs;
+    void reserve(const Extent& total) { runs.resize(total.leaves); }
+    void operator()(uint32_t leaf, const LeafRun& run) { runs[leaf] = run; }
 };
 
 void fill_leaf(LeafTriangle* out, const Bvh& bvh, std::span<const Triangle> triangles, uint32_t first_ref,
@@ -117,17 +207,26 @@ void fill_leaf(TriangleBlock<W>* out, const Bvh& bvh, std::span<const Triangle> 
     }
 }
 
+// Copies each leaf's triangles into the wide tree as soon as its entries are known.
+template <int N>
+struct TriangleLeaves {
+    WideBvh<N>& out;
+    const Bvh& bvh;
+    std::span<const Triangle> triangles;
+    void reserve(const Extent& total) { out.leaves.resize(total.entries); }
+    void operator()(uint32_t, const LeafRun& run) {
+        fill_leaf(&out.leaves[run.first_entry], bvh, triangles, run.first_ref, run.count);
+    }
+};
+
 }  // namespace
 
 template <int N>
 std::vector<LeafRun> collapse_nodes(const Bvh& bvh, WideNodes<N>& nodes, uint32_t (*entries)(int, uint32_t),
                                     uint32_t& total_entries) {
-    nodes.clear();
-    nodes.reserve(bvh.nodes.size() / 2 + 1);
-    Collapser<N> collapser(bvh, nodes, entries);
-    std::vector<LeafRun> runs = collapser.run();
-    total_entries = collapser.leaf_entries();
-    return runs;
+    RunList list;
+    total_entries = Collapser<N, RunList>(bvh, nodes, entries, list).run().entries;
+    return std::move(list.runs);
 }
 
 template <int N>
@@ -135,12 +234,8 @@ WideBvh<N> collapse(const Bvh& bvh, std::span<const Triangle> triangles) {
     WideBvh<N> out;
     if (bvh.nodes.empty()) return out;
     out.bounds = bvh.nodes[0].bounds;
-    uint32_t entries = 0;
-    const std::vector<LeafRun> runs = collapse_nodes<N>(bvh, out.nodes, &leaf_entries, entries);
-    out.leaves.resize(entries);
-    parallel::for_each(runs.size(), 4 * 1024, [&](size_t i) {
-        fill_leaf(&out.leaves[runs[i].first_entry], bvh, triangles, runs[i].first_ref, runs[i].count);
-    });
+    TriangleLeaves<N> leaves{out, bvh, triangles};
+    Collapser<N, TriangleLeaves<N>>(bvh, out.nodes, &leaf_entries, leaves).run();
     return out;
 }
 
