@@ -11,18 +11,25 @@ using namespace canopy::test;
 
 namespace {
 
+constexpr uint32_t kNoPrim = 0xffffffffu;
+
 // The collapse written plainly and serially from its specification: a wide node's children are the binary
 // node's children, the inner one of largest area opened until there are N (ties to the first); its inner
 // children take consecutive slots, then each one's subtree follows in turn; leaves take entries in the order
-// their parents are written.
+// their parents are written. With `triangles`, leaves are filled with them, and with blocks (N > 2) the
+// one-triangle leaves of a node share blocks, a lane each; without, each leaf is a run.
 template <int N>
 struct SerialCollapse {
+    using Leaf = LeafOf<N>;
+    static constexpr uint32_t kLanes = uint32_t(block_lanes(N));
     const Bvh& bvh;
+    std::span<const Triangle> triangles;
     WideNodes<N> nodes;
     std::vector<LeafRun> runs;
+    std::vector<Leaf> leaves;
     uint32_t entries = 0;
 
-    SerialCollapse(const Bvh& tree) : bvh(tree) {
+    SerialCollapse(const Bvh& tree, std::span<const Triangle> tris = {}) : bvh(tree), triangles(tris) {
         nodes.resize(1);
         write(0, tree.nodes[0].is_leaf() ? std::vector<uint32_t>{0} : open(0));
     }
@@ -54,75 +61,74 @@ struct SerialCollapse {
             node.count[i] = 0;
         }
         std::vector<uint32_t> inner, slots;
+        uint32_t shared_block = 0, shared_lanes = kLanes;  // the block one-triangle leaves fill, its used lanes
         for (size_t i = 0; i < children.size(); ++i) {
             const BvhNode& c = bvh.nodes[children[i]];
-            if (c.is_leaf()) {
-                node.child[i] = entries;
-                node.count[i] = c.count;
-                runs.push_back({entries, c.index, c.count});
-                entries += leaf_entries(N, c.count);
-            } else {
+            node.count[i] = c.count;
+            if (!c.is_leaf()) {
                 node.child[i] = uint32_t(nodes.size() + inner.size());
                 inner.push_back(children[i]);
                 slots.push_back(node.child[i]);
+            } else if (!triangles.empty() && N > 2 && c.count == 1) {
+                if (shared_lanes == kLanes) shared_block = entries, shared_lanes = 0, add_blocks(1);
+                node.child[i] = shared_block;
+                put(shared_block, shared_lanes++, bvh.refs[c.index]);
+            } else {
+                node.child[i] = entries;
+                runs.push_back({entries, c.index, c.count});
+                add_blocks(leaf_entries(N, c.count));
+                for (uint32_t k = 0; k < c.count; ++k) put(node.child[i] + k / kLanes, k % kLanes, bvh.refs[c.index + k]);
             }
         }
         nodes.resize(nodes.size() + inner.size());
         nodes[self] = node;
         for (size_t k = 0; k < inner.size(); ++k) write(slots[k], open(inner[k]));
     }
-};
 
-template <class T, class A>
-bool same_bytes(const std::vector<T, A>& a, const std::vector<T, A>& b) {
-    return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(T)) == 0;
-}
+    // Appends leaf entries, every lane empty: prim none, a degenerate triangle at the origin.
+    void add_blocks(uint32_t count) {
+        entries += count;
+        if (triangles.empty()) return;
+        Leaf empty;
+        std::memset(static_cast<void*>(&empty), 0, sizeof(empty));
+        if constexpr (N > 2) std::fill(std::begin(empty.prim), std::end(empty.prim), kNoPrim);
+        leaves.resize(entries, empty);
+    }
 
-bool same_runs(const std::vector<LeafRun>& a, const std::vector<LeafRun>& b) {
-    return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(LeafRun)) == 0;
-}
-
-// Every leaf entry holds its binary leaf's triangles in order, padding lanes no prim at the origin.
-constexpr uint32_t kNoPrim = 0xffffffffu;
-
-template <int N>
-size_t misplaced_triangles(const WideBvh<N>& wide, const std::vector<LeafRun>& runs, const Bvh& bvh,
-                           std::span<const Triangle> tris) {
-    size_t wrong = 0;
-    for (const LeafRun& run : runs) {
-        for (uint32_t i = 0; i < leaf_entries(N, run.count) * uint32_t(block_lanes(N)); ++i) {
-            const uint32_t prim = i < run.count ? bvh.refs[run.first_ref + i] : kNoPrim;
-            const Triangle t = i < run.count ? tris[prim] : Triangle{Vec3(0), Vec3(0), Vec3(0)};
-            if constexpr (N == 2) {
-                const LeafTriangle& l = wide.leaves[run.first_entry + i];
-                wrong += l.prim != prim || l.v0 != t.v0 || l.v1 != t.v1 || l.v2 != t.v2;
-            } else {
-                const auto& block = wide.leaves[run.first_entry + i / N];
-                const uint32_t lane = i % N;
-                const Vec3 v[3] = {t.v0, t.v1, t.v2};
-                wrong += block.prim[lane] != prim;
-                for (int k = 0; k < 3; ++k)
-                    for (int a = 0; a < 3; ++a) wrong += block.v[k][a][lane] != v[k][a];
-            }
+    void put(uint32_t entry, uint32_t lane, uint32_t prim) {
+        if (triangles.empty()) return;
+        const Triangle& t = triangles[prim];
+        if constexpr (N == 2) {
+            leaves[entry] = {t.v0, prim, t.v1, t.v2};
+        } else {
+            const Vec3 v[3] = {t.v0, t.v1, t.v2};
+            for (int k = 0; k < 3; ++k)
+                for (int a = 0; a < 3; ++a) leaves[entry].v[k][a][lane] = v[k][a];
+            leaves[entry].prim[lane] = prim;
         }
     }
-    return wrong;
+};
+
+template <class T, class A, class B>
+bool same_bytes(const std::vector<T, A>& a, const std::vector<T, B>& b) {
+    return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(T)) == 0;
 }
 
 template <int N>
 void check_against_serial(const Bvh& bvh, std::span<const Triangle> tris, const std::string& what) {
     INFO(what << " bvh" << N);
-    const SerialCollapse<N> expected(bvh);
+    const SerialCollapse<N> runs_only(bvh);
     WideNodes<N> nodes;
     uint32_t entries = 0;
     const std::vector<LeafRun> runs = collapse_nodes<N>(bvh, nodes, &leaf_entries, entries);
-    CHECK(same_bytes(nodes, expected.nodes));
-    CHECK(same_runs(runs, expected.runs));
-    CHECK(entries == expected.entries);
+    CHECK(same_bytes(nodes, runs_only.nodes));
+    CHECK(same_bytes(runs, runs_only.runs));
+    CHECK(entries == runs_only.entries);
+
+    const SerialCollapse<N> expected(bvh, tris);
     const WideBvh<N> wide = collapse<N>(bvh, tris);
     CHECK(same_bytes(wide.nodes, expected.nodes));
-    CHECK(wide.leaves.size() == expected.entries);
-    CHECK(misplaced_triangles(wide, expected.runs, bvh, tris) == 0);
+    CHECK(same_bytes(wide.leaves, expected.leaves));
 }
 
 template <int N>
@@ -169,4 +175,37 @@ TEST_CASE("a root that is a leaf collapses to one node with one leaf child", "[b
     REQUIRE(wide.nodes.size() == 1);
     CHECK(wide.nodes[0].count[0] == 2);
     CHECK(wide.nodes[0].is_empty(1));
+}
+
+TEST_CASE("one-triangle leaves of a wide node share a block, a lane each in child order", "[builders][collapse]") {
+    // Root over inner nodes 1 (the larger, opened first) and 2; node 1 over leaf 3 (triangle 0) and leaf 4
+    // (triangles 1 and 2), node 2 over leaves 5 (triangle 3) and 6 (triangle 4). Width 4 opens both: children
+    // 3, 5, 4, 6.
+    std::vector<Triangle> tris;
+    for (int i = 0; i < 5; ++i) tris.push_back({Vec3(float(i), 0, 0), Vec3(float(i) + 0.5f, 0, 0), Vec3(float(i), 0.5f, 0)});
+    auto box = [&](std::initializer_list<int> ids) {
+        BBox b;
+        for (int i : ids) b.extend(BBox::of(tris[size_t(i)]));
+        return b;
+    };
+    Bvh bvh;
+    bvh.refs = {0, 1, 2, 3, 4};
+    bvh.nodes = {{box({0, 1, 2, 3, 4}), 1, 0}, {box({0, 1, 2}), 3, 0}, {box({3, 4}), 5, 0},
+                 {box({0}), 0, 1}, {box({1, 2}), 1, 2}, {box({3}), 3, 1}, {box({4}), 4, 1}};
+    check_against_serial<4>(bvh, tris, "shared block");
+    check_against_serial<8>(bvh, tris, "shared block");
+
+    const WideBvh<4> wide = collapse<4>(bvh, tris);
+    REQUIRE(wide.nodes.size() == 1);
+    REQUIRE(wide.leaves.size() == 2);
+    const WideNode<4>& root = wide.nodes[0];
+    CHECK(std::vector<uint32_t>(root.child, root.child + 4) == std::vector<uint32_t>{0, 0, 1, 0});
+    CHECK(std::vector<uint32_t>(root.count, root.count + 4) == std::vector<uint32_t>{1, 1, 2, 1});
+    const TriangleBlock<4>& shared = wide.leaves[0];
+    CHECK(std::vector<uint32_t>(shared.prim, shared.prim + 4) == std::vector<uint32_t>{0, 3, 4, kNoPrim});
+    CHECK(std::vector<uint32_t>(wide.leaves[1].prim, wide.leaves[1].prim + 4) == std::vector<uint32_t>{1, 2, kNoPrim, kNoPrim});
+    // Its own triangle is found through each leaf child, and the traced hit is the same as without sharing.
+    Hit hit;
+    CHECK(closest_hit(wide, Ray{{4.1f, 0.1f, 1.0f}, {0, 0, -1}}, hit));
+    CHECK(hit.prim == 4);
 }
