@@ -164,7 +164,17 @@ private:
     // kept on a stack so that the first child's subtree comes next.
     void replay(const std::vector<WideChildren<N>>& records, uint32_t self, Cursor at) {
         std::vector<uint32_t> slots{self};
-        for (const WideChildren<N>& children : records) {
+        for (size_t r = 0; r < records.size(); ++r) {
+            // Fetch ahead what write_node reads at random: binary children two records on, and the leaf
+            // contents (triangles) of the next record, whose children are in cache by now.
+            if (r + 2 < records.size())
+                for (int i = 0; i < records[r + 2].count; ++i) __builtin_prefetch(&bvh_.nodes[records[r + 2].node[i]]);
+            if (r + 1 < records.size())
+                for (int i = 0; i < records[r + 1].count; ++i) {
+                    const BvhNode& c = bvh_.nodes[records[r + 1].node[i]];
+                    if (c.is_leaf()) sink_.prefetch(c.index);
+                }
+            const WideChildren<N>& children = records[r];
             const uint32_t slot = slots.back();
             slots.pop_back();
             write_node(children, slot, at);
@@ -229,6 +239,7 @@ struct RunList {
     void reserve(const Extent& total) { runs.resize(total.leaves); }
     void own(uint32_t leaf, const LeafRun& run) { runs[leaf] = run; }
     void shared(uint32_t, uint32_t, uint32_t, uint32_t) {}
+    void prefetch(uint32_t) const {}
     void pad(uint32_t, uint32_t) {}
 };
 
@@ -252,6 +263,13 @@ struct TriangleLeaves {
     std::span<const Triangle> triangles;
 
     void reserve(const Extent& total) { out.leaves.resize(total.entries); }
+
+    // The first triangle of a leaf (both cache lines it may span).
+    void prefetch(uint32_t first_ref) const {
+        const char* t = reinterpret_cast<const char*>(&triangles[bvh.refs[first_ref]]);
+        __builtin_prefetch(t);
+        __builtin_prefetch(t + sizeof(Triangle) - 1);
+    }
 
     void own(uint32_t, const LeafRun& run) {
         for (uint32_t i = 0; i < run.count; ++i) {
