@@ -88,7 +88,7 @@ public:
 private:
     // Binary trees smaller than this collapse on one thread.
     static constexpr size_t kParallelNodes = 16 * 1024;
-    // Wide levels above the subtrees that are measured and written concurrently: about 2^9 subtrees at any width.
+    // Wide levels above the subtrees that are measured and written concurrently: 2^8 or 2^9 subtrees at any width.
     static constexpr uint32_t kTopDepth = 9 / std::bit_width(unsigned(N - 1));
     static constexpr uint32_t kLanes = uint32_t(block_lanes(N));
 
@@ -203,14 +203,17 @@ private:
             } else if (shares_block(c)) {
                 if (shared_lanes == kLanes) shared_block = at.entries++, shared_lanes = 0;
                 node.child[i] = shared_block;
-                sink_.shared(at.leaves++, shared_block, shared_lanes++, c.index);
+                ++at.leaves;
+                if constexpr (LeafSink::kSharesBlocks) sink_.shared(shared_block, shared_lanes, c.index);
+                ++shared_lanes;
             } else {
                 node.child[i] = at.entries;
                 sink_.own(at.leaves++, LeafRun{at.entries, c.index, c.count});
                 at.entries += entries_(N, c.count);
             }
         }
-        if (shared_lanes < kLanes) sink_.pad(shared_block, shared_lanes);
+        if constexpr (LeafSink::kSharesBlocks)
+            if (shared_lanes < kLanes) sink_.pad(shared_block, shared_lanes);
     }
 
     static bool shares_block(const BvhNode& c) { return LeafSink::kSharesBlocks && c.count == 1; }
@@ -238,9 +241,7 @@ struct RunList {
 
     void reserve(const Extent& total) { runs.resize(total.leaves); }
     void own(uint32_t leaf, const LeafRun& run) { runs[leaf] = run; }
-    void shared(uint32_t, uint32_t, uint32_t, uint32_t) {}
-    void prefetch(uint32_t) const {}
-    void pad(uint32_t, uint32_t) {}
+    void prefetch(uint32_t) const {}  // leaves are filled later, by the caller
 };
 
 void put_triangle(LeafTriangle& out, uint32_t prim, const Triangle& t) { out = {t.v0, prim, t.v1, t.v2}; }
@@ -283,18 +284,15 @@ struct TriangleLeaves {
             if (run.count % N) pad(run.first_entry + run.count / N, run.count % N);
     }
 
-    void shared(uint32_t, uint32_t entry, uint32_t lane, uint32_t first_ref) {
-        if constexpr (N > 2) {
-            const uint32_t prim = bvh.refs[first_ref];
-            put_triangle(out.leaves[entry], lane, prim, triangles[prim]);
-        }
+    void shared(uint32_t entry, uint32_t lane, uint32_t ref) {
+        const uint32_t prim = bvh.refs[ref];
+        put_triangle(out.leaves[entry], lane, prim, triangles[prim]);
     }
 
     // Lanes past the last triangle: a degenerate triangle at the origin, never hit.
     void pad(uint32_t entry, uint32_t from_lane) {
-        if constexpr (N > 2)
-            for (uint32_t lane = from_lane; lane < uint32_t(N); ++lane)
-                put_triangle(out.leaves[entry], lane, TriangleBlock<N>::kNone, Triangle{Vec3(0), Vec3(0), Vec3(0)});
+        for (uint32_t lane = from_lane; lane < uint32_t(N); ++lane)
+            put_triangle(out.leaves[entry], lane, TriangleBlock<N>::kNone, Triangle{Vec3(0), Vec3(0), Vec3(0)});
     }
 };
 
