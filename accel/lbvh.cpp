@@ -9,6 +9,9 @@ namespace canopy {
 namespace {
 
 constexpr size_t kGrain = 16 * 1024;
+// Leaves ahead whose reference and node slots are fetched early: a leaf's reference is a random read, and its
+// node store must reach the cache before the atomic exchange that publishes it can complete.
+constexpr size_t kPrefetchDistance = 16;
 
 // Dissimilarity of sorted neighbours i and i + 1: the XOR of their codes, then (for equal codes, which Karras
 // 2012, sec. 4 tells apart by position) the XOR of their positions. Lexicographic order on the pair ranks
@@ -36,14 +39,22 @@ Bvh build_lbvh(BuildInput&& input, const BuildSettings&) {
     const uint32_t n = uint32_t(refs.size());
     if (n == 0) return {};
     Bvh bvh;
-    const MortonOrder sorted = sort_by_morton_code(refs);
+    MortonOrder sorted;
+    std::vector<std::atomic<uint32_t>> other_end;  // 0 until a child arrives, then its range end + 1
+    // The output arrays are initialised on one thread (a vector cannot be filled in parallel) while the codes sort.
+    parallel::fork_join(n, kGrain, [&] { sorted = sort_by_morton_code(refs); }, [&] {
+        bvh.refs.resize(n);
+        bvh.nodes.resize(2 * size_t(n) - 1);
+        other_end = std::vector<std::atomic<uint32_t>>(n - 1);
+    });
     const std::vector<uint64_t>& codes = sorted.codes;
     const std::vector<uint32_t>& order = sorted.order;
-    bvh.refs.resize(n);
-    bvh.nodes.resize(2 * size_t(n) - 1);
     const Dissimilarity dissimilarity(codes);
-    std::vector<std::atomic<uint32_t>> other_end(n - 1);  // 0 until a child arrives, then its range end + 1
     parallel::for_each(n, kGrain, [&](size_t leaf) {
+        if (leaf + kPrefetchDistance < n) {
+            __builtin_prefetch(&refs[order[leaf + kPrefetchDistance]]);
+            __builtin_prefetch(&bvh.nodes[2 * (leaf + kPrefetchDistance)], 1);
+        }
         const PrimRef& ref = refs[order[leaf]];
         bvh.refs[leaf] = ref.prim;
         BvhNode node{ref.bounds(), uint32_t(leaf), 1};

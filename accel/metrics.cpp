@@ -68,7 +68,8 @@ private:
 };
 
 // Wide trees: a leaf is a child slot of its parent; references are triangle slots in WideBvh::leaves (one per
-// LeafTriangle, block_lanes(N) per TriangleBlock, padding lanes holding no triangle).
+// LeafTriangle, block_lanes(N) per TriangleBlock, padding lanes holding no triangle). A leaf's references are its
+// own triangles' slots, also where one-triangle leaves share a block (a lane each, in child order: wide_bvh.h).
 template <int N>
 class WideView {
 public:
@@ -81,10 +82,11 @@ public:
     }
     void children(const NodeView& n, std::vector<NodeView>& out) const {
         const WideNode<N>& node = bvh_.nodes[n.id];
+        const std::array<RefRange, N> leaves = leaf_ranges(node);
         for (int i = 0; i < N; ++i) {
             if (node.is_empty(i)) continue;
             if (node.is_leaf(i))
-                out.push_back({child_box(n.id, i), costs_.triangle * double(node.count[i]), leaf_range(node.child[i], node.count[i]), true, node.child[i]});
+                out.push_back({child_box(n.id, i), costs_.triangle * double(node.count[i]), leaves[i], true, node.child[i]});
             else
                 out.push_back({child_box(n.id, i), costs_.inner, ranges_[node.child[i]], false, node.child[i]});
         }
@@ -97,8 +99,22 @@ public:
 
 private:
     static constexpr uint32_t kPerEntry = uint32_t(block_lanes(N));
-    RefRange leaf_range(uint32_t first_entry, uint32_t count) const {
-        return {first_entry * kPerEntry, first_entry * kPerEntry + count};
+    // Each leaf child's slots: its blocks' lanes from the first, or for a one-triangle leaf in blocks its lane in
+    // the block it shares, one per such sibling before it.
+    static std::array<RefRange, N> leaf_ranges(const WideNode<N>& node) {
+        std::array<RefRange, N> ranges{};
+        uint32_t shared_block = WideNode<N>::kEmpty, lane = 0;
+        for (int i = 0; i < N; ++i) {
+            if (!node.is_leaf(i)) continue;
+            uint32_t first = node.child[i] * kPerEntry;
+            if (N > 2 && node.count[i] == 1) {
+                lane = node.child[i] == shared_block ? lane + 1 : 0;
+                shared_block = node.child[i];
+                first += lane;
+            }
+            ranges[i] = {first, first + node.count[i]};
+        }
+        return ranges;
     }
     BBox child_box(uint32_t node, int i) const {
         const WideNode<N>& n = bvh_.nodes[node];
@@ -107,9 +123,10 @@ private:
     RefRange fill(uint32_t index) {
         RefRange range{~0u, 0};
         const WideNode<N>& node = bvh_.nodes[index];
+        const std::array<RefRange, N> leaves = leaf_ranges(node);
         for (int i = 0; i < N; ++i) {
             if (node.is_empty(i)) continue;
-            const RefRange c = node.is_leaf(i) ? leaf_range(node.child[i], node.count[i]) : fill(node.child[i]);
+            const RefRange c = node.is_leaf(i) ? leaves[i] : fill(node.child[i]);
             range = {std::min(range.first, c.first), std::max(range.second, c.second)};
         }
         return ranges_[index] = range;

@@ -2,6 +2,7 @@
 
 #include "accel/parallel.h"
 
+#include <algorithm>
 #include <array>
 #include <utility>
 
@@ -41,9 +42,36 @@ std::vector<uint64_t> morton_codes(const std::vector<PrimRef>& refs) {
     return codes;
 }
 
-// Least-significant-digit radix sort of (code, index) pairs, 11 bits a pass (six passes cover 63 bits), each
-// pass a parallel histogram, a prefix sum per chunk and a parallel stable scatter. Returns the indices in
-// code order; stable, so equal codes keep index order and the result does not depend on threads.
+constexpr int kDigitBits = 11;
+constexpr uint32_t kDigits = 1u << kDigitBits;
+// Bits the radix passes sort by, from the top: three digits. Codes equal in them are rare and few (their
+// centroids share a cell of a 2048^3 grid), so sorting those runs afterwards beats three more passes.
+constexpr int kSortedBits = 3 * kDigitBits;
+constexpr int kLowBits = 63 - kSortedBits;
+
+// Orders a run of codes equal in their top kSortedBits by whole code; equal codes keep index order, as they came
+// in. Short runs by insertion, long ones (dense clusters of tiny triangles) by std::sort on (code, index).
+void sort_run(uint64_t* codes, uint32_t* order, size_t n) {
+    if (n <= 32) {
+        for (size_t i = 1; i < n; ++i) {
+            const uint64_t code = codes[i];
+            const uint32_t index = order[i];
+            size_t j = i;
+            for (; j > 0 && codes[j - 1] > code; --j) codes[j] = codes[j - 1], order[j] = order[j - 1];
+            codes[j] = code, order[j] = index;
+        }
+        return;
+    }
+    std::vector<std::pair<uint64_t, uint32_t>> run(n);
+    for (size_t i = 0; i < n; ++i) run[i] = {codes[i], order[i]};
+    std::sort(run.begin(), run.end());
+    for (size_t i = 0; i < n; ++i) codes[i] = run[i].first, order[i] = run[i].second;
+}
+
+// Least-significant-digit radix sort of (code, index) pairs by the codes' top kSortedBits, 11 bits a pass, each
+// pass a parallel histogram, a prefix sum per chunk and a parallel stable scatter; then the runs still tied
+// sorted in place. Returns the indices in code order; stable, so equal codes keep index order and the result
+// does not depend on threads.
 std::vector<uint32_t> radix_sort(std::vector<uint64_t>& codes) {
     const size_t n = codes.size();
     const size_t chunks = std::max<size_t>(1, std::min<size_t>(64, n / kGrain));
@@ -51,20 +79,19 @@ std::vector<uint32_t> radix_sort(std::vector<uint64_t>& codes) {
     std::vector<uint64_t> next_codes(n);
     for (uint32_t i = 0; i < n; ++i) order[i] = i;
     auto chunk_begin = [&](size_t c) { return n * c / chunks; };
-    constexpr int kBits = 11;
-    constexpr uint64_t kDigits = uint64_t(1) << kBits;
-    for (int shift = 0; shift < 63; shift += kBits) {
+    for (int shift = kLowBits; shift < 63; shift += kDigitBits) {
+        auto digit = [shift](uint64_t code) { return uint32_t(code >> shift) & (kDigits - 1); };
         std::vector<std::array<uint32_t, kDigits>> counts(chunks);
         parallel::for_each(chunks, 1, [&](size_t c) {
             counts[c].fill(0);
-            for (size_t i = chunk_begin(c); i < chunk_begin(c + 1); ++i) ++counts[c][(codes[i] >> shift) & (kDigits - 1)];
+            for (size_t i = chunk_begin(c); i < chunk_begin(c + 1); ++i) ++counts[c][digit(codes[i])];
         });
         uint32_t offset = 0;
-        for (uint64_t digit = 0; digit < kDigits; ++digit)
-            for (size_t c = 0; c < chunks; ++c) offset += std::exchange(counts[c][digit], offset);
+        for (uint32_t d = 0; d < kDigits; ++d)
+            for (size_t c = 0; c < chunks; ++c) offset += std::exchange(counts[c][d], offset);
         parallel::for_each(chunks, 1, [&](size_t c) {
             for (size_t i = chunk_begin(c); i < chunk_begin(c + 1); ++i) {
-                const uint32_t at = counts[c][(codes[i] >> shift) & (kDigits - 1)]++;
+                const uint32_t at = counts[c][digit(codes[i])]++;
                 next_codes[at] = codes[i];
                 next_order[at] = order[i];
             }
@@ -72,6 +99,19 @@ std::vector<uint32_t> radix_sort(std::vector<uint64_t>& codes) {
         codes.swap(next_codes);
         order.swap(next_order);
     }
+    // Runs tied in the sorted bits, each handled by the chunk it starts in.
+    parallel::for_each(chunks, 1, [&](size_t c) {
+        for (size_t i = chunk_begin(c); i < chunk_begin(c + 1);) {
+            size_t end = i + 1;
+            while (end < n && codes[end] >> kLowBits == codes[i] >> kLowBits) ++end;
+            if (i > 0 && codes[i - 1] >> kLowBits == codes[i] >> kLowBits) {  // started in an earlier chunk
+                i = end;
+                continue;
+            }
+            if (end - i > 1) sort_run(&codes[i], &order[i], end - i);
+            i = end;
+        }
+    });
     return order;
 }
 

@@ -2,132 +2,308 @@
 #include "accel/parallel.h"
 
 #include <array>
+#include <bit>
 
 namespace canopy {
 namespace {
 
-template <int N>
-class Collapser {
-public:
-    Collapser(const Bvh& bvh, WideNodes<N>& nodes, uint32_t (*entries)(int, uint32_t))
-        : bvh_(bvh), nodes_(nodes), entries_(entries) {}
+// What a wide subtree takes of the output arrays: wide nodes (its root included), leaf entries, and leaves.
+struct Extent {
+    uint32_t nodes, entries, leaves;
 
-    // Writes every node; returns the leaves in emission order, for filling WideBvh::leaves in parallel.
-    std::vector<LeafRun> run() {
-        nodes_.resize(1);
-        if (bvh_.nodes[0].is_leaf()) {
-            const uint32_t lone[1] = {0};
-            emit(0, std::span<const uint32_t>(lone, 1));
-        } else {
-            emit_children_of(0, 0);
-        }
-        return std::move(leaf_runs_);
+    Extent& operator+=(const Extent& o) {
+        nodes += o.nodes, entries += o.entries, leaves += o.leaves;
+        return *this;
     }
+};
 
-    uint32_t leaf_entries() const { return leaf_entries_; }
+// Where a wide subtree's next node slot, leaf entry and leaf go.
+using Cursor = Extent;
 
-private:
-    // Writes wide node `self`, whose children come from opening binary node `index`.
-    void emit_children_of(uint32_t index, uint32_t self) {
-        std::array<uint32_t, N> open{};
-        int n = 0;
-        open[n++] = bvh_.nodes[index].index;
-        open[n++] = bvh_.nodes[index].index + 1;
-        while (n < N) {
+// A wide node's children as binary nodes (Ganestam and Doggett 2016, sec. 4.2): the binary node's two children,
+// then repeatedly the inner child of largest surface area (the first of equals) replaced by its two children
+// until there are N.
+template <int N>
+struct WideChildren {
+    std::array<uint32_t, N> node;
+    int count = 0;
+
+    WideChildren(const Bvh& bvh, uint32_t index) {
+        std::array<float, N> area;           // half area of an inner child; -1 for a leaf, never opened
+        std::array<uint32_t, N> first_child;  // of an inner child
+        auto put = [&](int slot, uint32_t child) {
+            const BvhNode& c = bvh.nodes[child];
+            node[slot] = child;
+            area[slot] = c.is_leaf() ? -1.0f : c.bounds.half_area();
+            first_child[slot] = c.index;
+            // Opening is a chain of dependent loads: start fetching the children it may open next.
+            if (!c.is_leaf()) __builtin_prefetch(&bvh.nodes[c.index]);
+        };
+        put(count++, bvh.nodes[index].index);
+        put(count++, bvh.nodes[index].index + 1);
+        while (count < N) {
             int widest = -1;
             float widest_area = -1.0f;
-            for (int i = 0; i < n; ++i) {
-                const BvhNode& c = bvh_.nodes[open[i]];
-                if (!c.is_leaf() && c.bounds.half_area() > widest_area) widest = i, widest_area = c.bounds.half_area();
-            }
+            for (int i = 0; i < count; ++i)
+                if (area[i] > widest_area) widest = i, widest_area = area[i];
             if (widest < 0) break;
-            const uint32_t first = bvh_.nodes[open[widest]].index;
-            open[widest] = first;
-            open[n++] = first + 1;
+            const uint32_t first = first_child[widest];
+            put(widest, first);
+            put(count++, first + 1);
         }
-        emit(self, std::span<const uint32_t>(open.data(), size_t(n)));
+    }
+    // A root that is a leaf: one leaf child.
+    explicit WideChildren(uint32_t leaf) : count(1) { node[0] = leaf; }
+};
+
+// Collapses so that subtrees are written in parallel yet land exactly where the serial depth-first order puts
+// them: a node's inner children take consecutive slots, then each child's subtree follows in turn (siblings sit
+// next to each other as the traversal visits them), and leaf entries follow the same order. A first pass measures
+// every subtree's extent, keeping the wide nodes of each subtree below the top levels in depth-first order; the
+// second writes the top levels and then replays those subtrees concurrently, each from its own cursor, without
+// opening binary nodes again.
+template <int N, class LeafSink>
+class Collapser {
+public:
+    Collapser(const Bvh& bvh, WideNodes<N>& nodes, uint32_t (*entries)(int, uint32_t), LeafSink& sink)
+        : bvh_(bvh), nodes_(nodes), entries_(entries), sink_(sink),
+          top_depth_(bvh.nodes.size() < kParallelNodes ? 0 : kTopDepth),
+          top_extents_(slot_of(top_depth_ + 1, 0)), subtrees_(slot_of(top_depth_ + 1, 0) - slot_of(top_depth_, 0)) {}
+
+    // Returns the extent of the whole tree; the sink is told it (`reserve`) before any leaf arrives.
+    Extent run() {
+        const bool lone_leaf = bvh_.nodes[0].is_leaf();
+        const Extent total = lone_leaf ? own_extent(WideChildren<N>(0)) : measure(0, 0, 0);
+        nodes_.clear();
+        nodes_.resize(total.nodes);
+        sink_.reserve(total);
+        Cursor at{1, 0, 0};
+        if (lone_leaf)
+            write_node(WideChildren<N>(0), 0, at);
+        else
+            fill(0, 0, 0, 0, at);
+        return total;
     }
 
-    // Writes the node at `self`: its inner children get consecutive slots first, then each is filled in
-    // turn, so siblings sit next to each other in memory as the traversal visits them.
-    void emit(uint32_t self, std::span<const uint32_t> children) {
-        for (int i = 0; i < N; ++i) set_empty(self, i);
-        uint32_t next = uint32_t(nodes_.size());
-        for (size_t i = 0; i < children.size(); ++i) {
-            const BvhNode& c = bvh_.nodes[children[i]];
-            set_box(self, int(i), c.bounds);
-            if (c.is_leaf()) {
-                nodes_[self].child[i] = leaf_entries_;
-                nodes_[self].count[i] = c.count;
-                leaf_runs_.push_back({leaf_entries_, c.index, c.count});
-                leaf_entries_ += entries_(N, c.count);
+private:
+    // Binary trees smaller than this collapse on one thread.
+    static constexpr size_t kParallelNodes = 16 * 1024;
+    // Wide levels above the subtrees that are measured and written concurrently: 2^8 or 2^9 subtrees at any width.
+    static constexpr uint32_t kTopDepth = 9 / std::bit_width(unsigned(N - 1));
+    static constexpr uint32_t kLanes = uint32_t(block_lanes(N));
+
+    // Index of the top-level node at `depth` reached by child choices `path` (base N digits), in level order.
+    static uint32_t slot_of(uint32_t depth, uint32_t path) {
+        uint32_t first = 0;
+        for (uint32_t d = 0, level = 1; d < depth; ++d, level *= N) first += level;
+        return first + path;
+    }
+
+    // The extent of the wide subtree rooted at inner binary node `index`, reached from the root by `path`.
+    Extent measure(uint32_t index, uint32_t depth, uint32_t path) {
+        if (depth == top_depth_) return record(index, subtrees_[path]);
+        const WideChildren<N> children(bvh_, index);
+        parallel::for_each(size_t(children.count), 1, [&](size_t i) {
+            const uint32_t child = children.node[i];
+            if (!bvh_.nodes[child].is_leaf())
+                top_extents_[slot_of(depth + 1, path * N + uint32_t(i))] = measure(child, depth + 1, path * N + uint32_t(i));
+        });
+        Extent total = own_extent(children);
+        for (int i = 0; i < children.count; ++i)
+            if (!bvh_.nodes[children.node[i]].is_leaf()) total += top_extents_[slot_of(depth + 1, path * N + uint32_t(i))];
+        return total;
+    }
+
+    // Measures a subtree below the top levels, appending its wide nodes' children in depth-first order.
+    Extent record(uint32_t index, std::vector<WideChildren<N>>& out) {
+        out.emplace_back(bvh_, index);
+        const WideChildren<N> children = out.back();
+        Extent total = own_extent(children);
+        for (int i = 0; i < children.count; ++i)
+            if (!bvh_.nodes[children.node[i]].is_leaf()) total += record(children.node[i], out);
+        return total;
+    }
+
+    // What a wide node takes itself: its slot, its leaves and their entries.
+    Extent own_extent(const WideChildren<N>& children) const {
+        Extent own{1, 0, 0};
+        uint32_t shared = 0;
+        for (int i = 0; i < children.count; ++i) {
+            const BvhNode& c = bvh_.nodes[children.node[i]];
+            if (!c.is_leaf()) continue;
+            ++own.leaves;
+            if (shares_block(c))
+                ++shared;
+            else
+                own.entries += entries_(N, c.count);
+        }
+        own.entries += (shared + kLanes - 1) / kLanes;
+        return own;
+    }
+
+    // Writes the top-level subtree rooted at binary node `index` into slot `self`, its descendants from `at`: each
+    // inner child's subtree starts where its earlier siblings' extents end, so they are written concurrently.
+    void fill(uint32_t index, uint32_t self, uint32_t depth, uint32_t path, Cursor at) {
+        if (depth == top_depth_) return replay(subtrees_[path], self, at);
+        const WideChildren<N> children(bvh_, index);
+        write_node(children, self, at);
+        std::array<Cursor, N> start;
+        for (int i = 0; i < children.count; ++i) {
+            if (nodes_[self].is_leaf(i)) continue;
+            start[i] = at;
+            const Extent& e = top_extents_[slot_of(depth + 1, path * N + uint32_t(i))];
+            at += Extent{e.nodes - 1, e.entries, e.leaves};  // its root took a slot in write_node
+        }
+        parallel::for_each(size_t(children.count), 1, [&](size_t i) {
+            if (!nodes_[self].is_leaf(int(i)))
+                fill(children.node[i], nodes_[self].child[i], depth + 1, path * N + uint32_t(i), start[i]);
+        });
+    }
+
+    // Writes a recorded subtree from slot `self` in depth-first order: each node takes the slot its parent gave it,
+    // kept on a stack so that the first child's subtree comes next.
+    void replay(const std::vector<WideChildren<N>>& records, uint32_t self, Cursor at) {
+        std::vector<uint32_t> slots{self};
+        for (size_t r = 0; r < records.size(); ++r) {
+            // Fetch ahead what write_node reads at random: binary children two records on, and the leaf
+            // contents (triangles) of the next record, whose children are in cache by now.
+            if (r + 2 < records.size())
+                for (int i = 0; i < records[r + 2].count; ++i) __builtin_prefetch(&bvh_.nodes[records[r + 2].node[i]]);
+            if (r + 1 < records.size())
+                for (int i = 0; i < records[r + 1].count; ++i) {
+                    const BvhNode& c = bvh_.nodes[records[r + 1].node[i]];
+                    if (c.is_leaf()) sink_.prefetch(c.index);
+                }
+            const WideChildren<N>& children = records[r];
+            const uint32_t slot = slots.back();
+            slots.pop_back();
+            write_node(children, slot, at);
+            for (int i = children.count - 1; i >= 0; --i)
+                if (!nodes_[slot].is_leaf(i)) slots.push_back(nodes_[slot].child[i]);
+        }
+    }
+
+    // Writes node `self`: inner children take the next node slots, leaf children the next entries, the
+    // one-triangle leaves among them sharing blocks where the sink shares them.
+    void write_node(const WideChildren<N>& children, uint32_t self, Cursor& at) {
+        WideNode<N>& node = nodes_[self];
+        uint32_t shared_block = 0, shared_lanes = kLanes;  // the block one-triangle leaves are filling
+        for (int i = 0; i < N; ++i) {
+            if (i >= children.count) {
+                set_box(node, i, BBox{});  // lower = +inf, upper = -inf: never hit
+                node.child[i] = WideNode<N>::kEmpty;
+                node.count[i] = 0;
+                continue;
+            }
+            const BvhNode& c = bvh_.nodes[children.node[i]];
+            set_box(node, i, c.bounds);
+            node.count[i] = c.count;
+            if (!c.is_leaf()) {
+                node.child[i] = at.nodes++;
+            } else if (shares_block(c)) {
+                if (shared_lanes == kLanes) shared_block = at.entries++, shared_lanes = 0;
+                node.child[i] = shared_block;
+                ++at.leaves;
+                if constexpr (LeafSink::kSharesBlocks) sink_.shared(shared_block, shared_lanes, c.index);
+                ++shared_lanes;
             } else {
-                nodes_[self].child[i] = next++;
-                nodes_[self].count[i] = 0;
+                node.child[i] = at.entries;
+                sink_.own(at.leaves++, LeafRun{at.entries, c.index, c.count});
+                at.entries += entries_(N, c.count);
             }
         }
-        nodes_.resize(next);
-        for (size_t i = 0; i < children.size(); ++i)
-            if (!bvh_.nodes[children[i]].is_leaf()) emit_children_of(children[i], nodes_[self].child[i]);
+        if constexpr (LeafSink::kSharesBlocks)
+            if (shared_lanes < kLanes) sink_.pad(shared_block, shared_lanes);
     }
 
-    void set_box(uint32_t node, int i, const BBox& box) {
+    static bool shares_block(const BvhNode& c) { return LeafSink::kSharesBlocks && c.count == 1; }
+
+    static void set_box(WideNode<N>& node, int i, const BBox& box) {
         for (int a = 0; a < 3; ++a) {
-            nodes_[node].lower(a, i) = box.lower[a];
-            nodes_[node].upper(a, i) = box.upper[a];
+            node.lower(a, i) = box.lower[a];
+            node.upper(a, i) = box.upper[a];
         }
-    }
-
-    void set_empty(uint32_t node, int i) {
-        set_box(node, i, BBox{});  // lower = +inf, upper = -inf
-        nodes_[node].child[i] = WideNode<N>::kEmpty;
-        nodes_[node].count[i] = 0;
     }
 
     const Bvh& bvh_;
     WideNodes<N>& nodes_;
     uint32_t (*entries_)(int, uint32_t);
-    std::vector<LeafRun> leaf_runs_;
-    uint32_t leaf_entries_ = 0;
+    LeafSink& sink_;
+    const uint32_t top_depth_;
+    std::vector<Extent> top_extents_;                      // by top-level slot (slot_of)
+    std::vector<std::vector<WideChildren<N>>> subtrees_;  // by path at top_depth_: recorded wide nodes
 };
 
-void fill_leaf(LeafTriangle* out, const Bvh& bvh, std::span<const Triangle> triangles, uint32_t first_ref,
-               uint32_t count) {
-    for (uint32_t i = 0; i < count; ++i) {
-        const uint32_t prim = bvh.refs[first_ref + i];
-        const Triangle& t = triangles[prim];
-        out[i] = {t.v0, prim, t.v1, t.v2};
-    }
-}
+// Keeps the leaves in emission order, one run each, for a caller whose leaves hold something else than triangles.
+struct RunList {
+    static constexpr bool kSharesBlocks = false;
+    std::vector<LeafRun> runs;
+
+    void reserve(const Extent& total) { runs.resize(total.leaves); }
+    void own(uint32_t leaf, const LeafRun& run) { runs[leaf] = run; }
+    void prefetch(uint32_t) const {}  // leaves are filled later, by the caller
+};
+
+void put_triangle(LeafTriangle& out, uint32_t prim, const Triangle& t) { out = {t.v0, prim, t.v1, t.v2}; }
 
 template <int W>
-void fill_leaf(TriangleBlock<W>* out, const Bvh& bvh, std::span<const Triangle> triangles, uint32_t first_ref,
-               uint32_t count) {
-    for (uint32_t b = 0; b < leaf_entries(W, count); ++b) {
-        TriangleBlock<W>& block = out[b];
-        for (int lane = 0; lane < W; ++lane) {
-            const uint32_t i = b * W + uint32_t(lane);
-            const uint32_t prim = i < count ? bvh.refs[first_ref + i] : TriangleBlock<W>::kNone;
-            const Triangle t = i < count ? triangles[prim] : Triangle{Vec3(0), Vec3(0), Vec3(0)};
-            const Vec3* vertices[3] = {&t.v0, &t.v1, &t.v2};
-            for (int v = 0; v < 3; ++v)
-                for (int a = 0; a < 3; ++a) block.v[v][a][lane] = (*vertices[v])[a];
-            block.prim[lane] = prim;
-        }
-    }
+void put_triangle(TriangleBlock<W>& block, uint32_t lane, uint32_t prim, const Triangle& t) {
+    const Vec3* vertices[3] = {&t.v0, &t.v1, &t.v2};
+    for (int v = 0; v < 3; ++v)
+        for (int a = 0; a < 3; ++a) block.v[v][a][lane] = (*vertices[v])[a];
+    block.prim[lane] = prim;
 }
+
+// Copies each leaf's triangles into the wide tree as soon as its entries are known. With SIMD blocks the
+// one-triangle leaves of a node share blocks, a lane each (see wide_bvh.h).
+template <int N>
+struct TriangleLeaves {
+    static constexpr bool kSharesBlocks = N > 2;
+    WideBvh<N>& out;
+    const Bvh& bvh;
+    std::span<const Triangle> triangles;
+
+    void reserve(const Extent& total) { out.leaves.resize(total.entries); }
+
+    // The first triangle of a leaf (both cache lines it may span).
+    void prefetch(uint32_t first_ref) const {
+        const char* t = reinterpret_cast<const char*>(&triangles[bvh.refs[first_ref]]);
+        __builtin_prefetch(t);
+        __builtin_prefetch(t + sizeof(Triangle) - 1);
+    }
+
+    void own(uint32_t, const LeafRun& run) {
+        for (uint32_t i = 0; i < run.count; ++i) {
+            const uint32_t prim = bvh.refs[run.first_ref + i];
+            if constexpr (N == 2)
+                put_triangle(out.leaves[run.first_entry + i], prim, triangles[prim]);
+            else
+                put_triangle(out.leaves[run.first_entry + i / N], i % N, prim, triangles[prim]);
+        }
+        if constexpr (N > 2)
+            if (run.count % N) pad(run.first_entry + run.count / N, run.count % N);
+    }
+
+    void shared(uint32_t entry, uint32_t lane, uint32_t ref) {
+        const uint32_t prim = bvh.refs[ref];
+        put_triangle(out.leaves[entry], lane, prim, triangles[prim]);
+    }
+
+    // Lanes past the last triangle: a degenerate triangle at the origin, never hit.
+    void pad(uint32_t entry, uint32_t from_lane) {
+        for (uint32_t lane = from_lane; lane < uint32_t(N); ++lane)
+            put_triangle(out.leaves[entry], lane, TriangleBlock<N>::kNone, Triangle{Vec3(0), Vec3(0), Vec3(0)});
+    }
+};
 
 }  // namespace
 
 template <int N>
 std::vector<LeafRun> collapse_nodes(const Bvh& bvh, WideNodes<N>& nodes, uint32_t (*entries)(int, uint32_t),
                                     uint32_t& total_entries) {
-    nodes.clear();
-    nodes.reserve(bvh.nodes.size() / 2 + 1);
-    Collapser<N> collapser(bvh, nodes, entries);
-    std::vector<LeafRun> runs = collapser.run();
-    total_entries = collapser.leaf_entries();
-    return runs;
+    RunList list;
+    total_entries = Collapser<N, RunList>(bvh, nodes, entries, list).run().entries;
+    return std::move(list.runs);
 }
 
 template <int N>
@@ -135,12 +311,8 @@ WideBvh<N> collapse(const Bvh& bvh, std::span<const Triangle> triangles) {
     WideBvh<N> out;
     if (bvh.nodes.empty()) return out;
     out.bounds = bvh.nodes[0].bounds;
-    uint32_t entries = 0;
-    const std::vector<LeafRun> runs = collapse_nodes<N>(bvh, out.nodes, &leaf_entries, entries);
-    out.leaves.resize(entries);
-    parallel::for_each(runs.size(), 4 * 1024, [&](size_t i) {
-        fill_leaf(&out.leaves[runs[i].first_entry], bvh, triangles, runs[i].first_ref, runs[i].count);
-    });
+    TriangleLeaves<N> leaves{out, bvh, triangles};
+    Collapser<N, TriangleLeaves<N>>(bvh, out.nodes, &leaf_entries, leaves).run();
     return out;
 }
 

@@ -1,7 +1,7 @@
 #pragma once
 // Traversal layout: N-wide nodes holding their children's boxes in SoA, collapsed from any builder's
 // binary BVH, with leaf triangles copied in leaf order so a leaf is one contiguous run (N = 2) or one
-// run of 4-wide SoA blocks (N = 4, 8).
+// run of N-wide SoA blocks (N = 4, 8).
 #include "accel/bvh.h"
 #include "accel/huge_page_allocator.h"
 
@@ -36,7 +36,7 @@ struct LeafTriangle {
     Vec3 v1, v2;
 };
 
-// W triangles in SoA for the SIMD intersector: v[vertex][axis][lane]. Lanes past a leaf's end hold a
+// W triangles in SoA for the SIMD intersector: v[vertex][axis][lane]. Lanes holding no triangle hold a
 // degenerate triangle at the origin (never hit) and prim kNone.
 template <int W>
 struct alignas(4 * W) TriangleBlock {
@@ -58,7 +58,12 @@ constexpr int block_lanes(int width) {
 #endif
 }
 
-// A leaf child's `child` indexes `leaves`; its `count` is always the number of triangles.
+// A leaf child's `child` indexes `leaves`; its `count` is always the number of triangles. With blocks (N > 2) a
+// leaf child is its leaf_entries(N, count) blocks from `child`, which the kernels test whole, every lane: the
+// one-triangle leaves of one wide node share a block, a lane each in child order (the k-th such child has lane
+// k), so a one-triangle leaf's block may hold its siblings' triangles too. Testing them with it costs no more (the lanes are tested anyway) and
+// what they hit are real hits, so closest and any hits stay exact; an LBVH's one-triangle leaves take a block
+// per wide node instead of one each.
 template <int N>
 using LeafOf = std::conditional_t<(N > 2), TriangleBlock<block_lanes(N)>, LeafTriangle>;
 

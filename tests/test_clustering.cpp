@@ -3,8 +3,10 @@
 
 #include "accel/cluster_tree.h"
 #include "accel/lbvh_sah.h"
+#include "accel/morton.h"
 #include "accel/ploc.h"
 
+#include <numeric>
 #include <stdexcept>
 
 using namespace canopy;
@@ -47,7 +49,48 @@ uint32_t check_tree(const Bvh& bvh, size_t triangles, uint32_t max_leaf) {
 
 Triangle small_triangle_at(float x) { return {Vec3(x, 0, 0), Vec3(x + 0.5f, 0, 0), Vec3(x, 0.5f, 0)}; }
 
+// 63-bit Morton codes of the references' centroids in their bounds, interleaved bit by bit (x highest).
+std::vector<uint64_t> reference_codes(const std::vector<PrimRef>& refs) {
+    BBox centroids;
+    for (const PrimRef& r : refs) centroids.extend(r.center2());
+    const Vec3 extent = centroids.extent();
+    Vec3 scale;
+    for (int a = 0; a < 3; ++a) scale[a] = extent[a] > 0 ? float((1u << 21) - 1) / extent[a] : 0.0f;
+    std::vector<uint64_t> codes;
+    for (const PrimRef& r : refs) {
+        const Vec3 q = (r.center2() - centroids.lower) * scale;
+        const uint64_t cell[3] = {uint64_t(q.x), uint64_t(q.y), uint64_t(q.z)};
+        uint64_t code = 0;
+        for (int bit = 0; bit < 21; ++bit)
+            for (int a = 0; a < 3; ++a) code |= (cell[a] >> bit & 1) << (3 * bit + 2 - a);
+        codes.push_back(code);
+    }
+    return codes;
+}
+
 }  // namespace
+
+TEST_CASE("Morton order is a stable sort of the centroids' codes", "[builders][clustering]") {
+    // A spread-out surface, plus clusters that tie in the radix-sorted top bits: short runs, one long run of
+    // distinct codes (a cloud of tiny triangles), and identical centroids (equal codes keep index order).
+    std::vector<Triangle> tris = flatten(load_scene("gen:surface?tris=20000&seed=3")).triangles;
+    for (int i = 0; i < 500; ++i) {
+        const Vec3 p(0.1f + 1e-6f * float(i % 37), 0.2f + 1e-6f * float(i % 11), 0.3f + 1e-6f * float(i % 5));
+        tris.push_back({p, p + Vec3(1e-7f, 0, 0), p + Vec3(0, 1e-7f, 0)});
+    }
+    for (int i = 0; i < 40; ++i) tris.push_back(small_triangle_at(0.25f));
+    const std::vector<PrimRef> refs = make_prim_refs(tris);
+    const std::vector<uint64_t> codes = reference_codes(refs);
+    std::vector<uint32_t> expected(refs.size());
+    std::iota(expected.begin(), expected.end(), 0u);
+    std::stable_sort(expected.begin(), expected.end(), [&](uint32_t a, uint32_t b) { return codes[a] < codes[b]; });
+
+    const MortonOrder sorted = sort_by_morton_code(refs);
+    CHECK(sorted.order == expected);
+    size_t wrong_codes = 0;
+    for (size_t i = 0; i < expected.size(); ++i) wrong_codes += sorted.codes[i] != codes[expected[i]];
+    CHECK(wrong_codes == 0);
+}
 
 TEST_CASE("agglomerative clustering merges the closest pairs first", "[builders][clustering]") {
     // Two pairs far apart: each pair must be a subtree, whatever the input order.

@@ -1,0 +1,211 @@
+// The collapse into the kernels' wide layout: the parallel collapse writes exactly what the depth-first
+// order of wide_bvh.h specifies, with any number of threads.
+#include "oracle.h"
+
+#include <tbb/global_control.h>
+
+#include <cstring>
+
+using namespace canopy;
+using namespace canopy::test;
+
+namespace {
+
+constexpr uint32_t kNoPrim = 0xffffffffu;
+
+// The collapse written plainly and serially from its specification: a wide node's children are the binary
+// node's children, the inner one of largest area opened until there are N (ties to the first); its inner
+// children take consecutive slots, then each one's subtree follows in turn; leaves take entries in the order
+// their parents are written. With `triangles`, leaves are filled with them, and with blocks (N > 2) the
+// one-triangle leaves of a node share blocks, a lane each; without, each leaf is a run.
+template <int N>
+struct SerialCollapse {
+    using Leaf = LeafOf<N>;
+    static constexpr uint32_t kLanes = uint32_t(block_lanes(N));
+    const Bvh& bvh;
+    std::span<const Triangle> triangles;
+    WideNodes<N> nodes;
+    std::vector<LeafRun> runs;
+    std::vector<Leaf> leaves;
+    uint32_t entries = 0;
+
+    SerialCollapse(const Bvh& tree, std::span<const Triangle> tris = {}) : bvh(tree), triangles(tris) {
+        nodes.resize(1);
+        write(0, tree.nodes[0].is_leaf() ? std::vector<uint32_t>{0} : open(0));
+    }
+
+    std::vector<uint32_t> open(uint32_t index) const {
+        std::vector<uint32_t> children{bvh.nodes[index].index, bvh.nodes[index].index + 1};
+        while (children.size() < size_t(N)) {
+            size_t widest = children.size();
+            for (size_t i = 0; i < children.size(); ++i) {
+                const BvhNode& c = bvh.nodes[children[i]];
+                if (c.is_leaf()) continue;
+                if (widest == children.size() || c.bounds.half_area() > bvh.nodes[children[widest]].bounds.half_area())
+                    widest = i;
+            }
+            if (widest == children.size()) break;
+            const uint32_t opened = children[widest];
+            children[widest] = bvh.nodes[opened].index;
+            children.push_back(bvh.nodes[opened].index + 1);
+        }
+        return children;
+    }
+
+    void write(uint32_t self, const std::vector<uint32_t>& children) {
+        WideNode<N> node;
+        for (int i = 0; i < N; ++i) {
+            const BBox box = i < int(children.size()) ? bvh.nodes[children[i]].bounds : BBox{};
+            for (int a = 0; a < 3; ++a) node.lower(a, i) = box.lower[a], node.upper(a, i) = box.upper[a];
+            node.child[i] = WideNode<N>::kEmpty;
+            node.count[i] = 0;
+        }
+        std::vector<uint32_t> inner, slots;
+        uint32_t shared_block = 0, shared_lanes = kLanes;  // the block one-triangle leaves fill, its used lanes
+        for (size_t i = 0; i < children.size(); ++i) {
+            const BvhNode& c = bvh.nodes[children[i]];
+            node.count[i] = c.count;
+            if (!c.is_leaf()) {
+                node.child[i] = uint32_t(nodes.size() + inner.size());
+                inner.push_back(children[i]);
+                slots.push_back(node.child[i]);
+            } else if (!triangles.empty() && N > 2 && c.count == 1) {
+                if (shared_lanes == kLanes) shared_block = entries, shared_lanes = 0, add_blocks(1);
+                node.child[i] = shared_block;
+                put(shared_block, shared_lanes++, bvh.refs[c.index]);
+            } else {
+                node.child[i] = entries;
+                runs.push_back({entries, c.index, c.count});
+                add_blocks(leaf_entries(N, c.count));
+                for (uint32_t k = 0; k < c.count; ++k) put(node.child[i] + k / kLanes, k % kLanes, bvh.refs[c.index + k]);
+            }
+        }
+        nodes.resize(nodes.size() + inner.size());
+        nodes[self] = node;
+        for (size_t k = 0; k < inner.size(); ++k) write(slots[k], open(inner[k]));
+    }
+
+    // Appends leaf entries, every lane empty: prim none, a degenerate triangle at the origin.
+    void add_blocks(uint32_t count) {
+        entries += count;
+        if (triangles.empty()) return;
+        Leaf empty;
+        std::memset(static_cast<void*>(&empty), 0, sizeof(empty));
+        if constexpr (N > 2) std::fill(std::begin(empty.prim), std::end(empty.prim), kNoPrim);
+        leaves.resize(entries, empty);
+    }
+
+    void put(uint32_t entry, uint32_t lane, uint32_t prim) {
+        if (triangles.empty()) return;
+        const Triangle& t = triangles[prim];
+        if constexpr (N == 2) {
+            leaves[entry] = {t.v0, prim, t.v1, t.v2};
+        } else {
+            const Vec3 v[3] = {t.v0, t.v1, t.v2};
+            for (int k = 0; k < 3; ++k)
+                for (int a = 0; a < 3; ++a) leaves[entry].v[k][a][lane] = v[k][a];
+            leaves[entry].prim[lane] = prim;
+        }
+    }
+};
+
+template <class T, class A, class B>
+bool same_bytes(const std::vector<T, A>& a, const std::vector<T, B>& b) {
+    return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(T)) == 0;
+}
+
+template <int N>
+void check_against_serial(const Bvh& bvh, std::span<const Triangle> tris, const std::string& what) {
+    INFO(what << " bvh" << N);
+    const SerialCollapse<N> runs_only(bvh);
+    WideNodes<N> nodes;
+    uint32_t entries = 0;
+    const std::vector<LeafRun> runs = collapse_nodes<N>(bvh, nodes, &leaf_entries, entries);
+    CHECK(same_bytes(nodes, runs_only.nodes));
+    CHECK(same_bytes(runs, runs_only.runs));
+    CHECK(entries == runs_only.entries);
+
+    const SerialCollapse<N> expected(bvh, tris);
+    const WideBvh<N> wide = collapse<N>(bvh, tris);
+    CHECK(same_bytes(wide.nodes, expected.nodes));
+    CHECK(same_bytes(wide.leaves, expected.leaves));
+}
+
+template <int N>
+WideBvh<N> collapse_with_threads(const Bvh& bvh, std::span<const Triangle> tris, int threads) {
+    tbb::global_control limit(tbb::global_control::max_allowed_parallelism, size_t(threads));
+    return collapse<N>(bvh, tris);
+}
+
+template <int N>
+void check_thread_independence(const Bvh& bvh, std::span<const Triangle> tris, const std::string& what) {
+    INFO(what << " bvh" << N);
+    const WideBvh<N> one = collapse_with_threads<N>(bvh, tris, 1), two = collapse_with_threads<N>(bvh, tris, 2);
+    CHECK(same_bytes(one.nodes, two.nodes));
+    CHECK(same_bytes(one.leaves, two.leaves));
+}
+
+}  // namespace
+
+TEST_CASE("the collapse writes the depth-first layout, the same with 1 and 2 threads", "[builders][collapse]") {
+    // Large enough that the parallel path splits subtrees (lbvh gives thousands of wide nodes), plus a tree small
+    // enough for the serial path alone.
+    for (const char* spec : {"gen:cylinders?tris=30000&seed=5", "gen:box?tris=300&seed=6"}) {
+        const FlatScene flat = flatten(load_scene(spec));
+        for (const char* builder : {"binned", "lbvh", "lbvh-sah", "sbvh"}) {
+            const Bvh bvh = find_builder(builder).build(BuildInput{flat.triangles, make_prim_refs(flat.triangles)}, BuildSettings{});
+            const std::string what = std::string(spec) + " / " + builder;
+            check_against_serial<2>(bvh, flat.triangles, what);
+            check_against_serial<4>(bvh, flat.triangles, what);
+            check_against_serial<8>(bvh, flat.triangles, what);
+            check_thread_independence<2>(bvh, flat.triangles, what);
+            check_thread_independence<8>(bvh, flat.triangles, what);
+        }
+    }
+}
+
+TEST_CASE("a root that is a leaf collapses to one node with one leaf child", "[builders][collapse]") {
+    const std::vector<Triangle> tris{{Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0)}, {Vec3(0, 0, 1), Vec3(1, 0, 1), Vec3(0, 1, 1)}};
+    Bvh bvh;
+    bvh.nodes = {{merge(BBox::of(tris[0]), BBox::of(tris[1])), 0, 2}};
+    bvh.refs = {1, 0};
+    check_against_serial<2>(bvh, tris, "leaf root");
+    check_against_serial<8>(bvh, tris, "leaf root");
+    const WideBvh<8> wide = collapse<8>(bvh, tris);
+    REQUIRE(wide.nodes.size() == 1);
+    CHECK(wide.nodes[0].count[0] == 2);
+    CHECK(wide.nodes[0].is_empty(1));
+}
+
+TEST_CASE("one-triangle leaves of a wide node share a block, a lane each in child order", "[builders][collapse]") {
+    // Root over inner nodes 1 (the larger, opened first) and 2; node 1 over leaf 3 (triangle 0) and leaf 4
+    // (triangles 1 and 2), node 2 over leaves 5 (triangle 3) and 6 (triangle 4). Width 4 opens both: children
+    // 3, 5, 4, 6.
+    std::vector<Triangle> tris;
+    for (int i = 0; i < 5; ++i) tris.push_back({Vec3(float(i), 0, 0), Vec3(float(i) + 0.5f, 0, 0), Vec3(float(i), 0.5f, 0)});
+    auto box = [&](std::initializer_list<int> ids) {
+        BBox b;
+        for (int i : ids) b.extend(BBox::of(tris[size_t(i)]));
+        return b;
+    };
+    Bvh bvh;
+    bvh.refs = {0, 1, 2, 3, 4};
+    bvh.nodes = {{box({0, 1, 2, 3, 4}), 1, 0}, {box({0, 1, 2}), 3, 0}, {box({3, 4}), 5, 0},
+                 {box({0}), 0, 1}, {box({1, 2}), 1, 2}, {box({3}), 3, 1}, {box({4}), 4, 1}};
+    check_against_serial<4>(bvh, tris, "shared block");
+    check_against_serial<8>(bvh, tris, "shared block");
+
+    const WideBvh<4> wide = collapse<4>(bvh, tris);
+    REQUIRE(wide.nodes.size() == 1);
+    REQUIRE(wide.leaves.size() == 2);
+    const WideNode<4>& root = wide.nodes[0];
+    CHECK(std::vector<uint32_t>(root.child, root.child + 4) == std::vector<uint32_t>{0, 0, 1, 0});
+    CHECK(std::vector<uint32_t>(root.count, root.count + 4) == std::vector<uint32_t>{1, 1, 2, 1});
+    const TriangleBlock<4>& shared = wide.leaves[0];
+    CHECK(std::vector<uint32_t>(shared.prim, shared.prim + 4) == std::vector<uint32_t>{0, 3, 4, kNoPrim});
+    CHECK(std::vector<uint32_t>(wide.leaves[1].prim, wide.leaves[1].prim + 4) == std::vector<uint32_t>{1, 2, kNoPrim, kNoPrim});
+    // Its own triangle is found through each leaf child, and the traced hit is the same as without sharing.
+    Hit hit;
+    CHECK(closest_hit(wide, Ray{{4.1f, 0.1f, 1.0f}, {0, 0, -1}}, hit));
+    CHECK(hit.prim == 4);
+}
