@@ -161,7 +161,8 @@ void append_leaf(std::vector<TriangleBlock<W>, HugePageAllocator<TriangleBlock<W
     }
 }
 
-// Sec. 5.2: objects get #instances + max(#instances, #triangles / 1000) BRefs, instanced objects 4 x #instances.
+// Sec. 5.2: objects get #instances + max(#instances, #triangles / 1000) BRefs (the paper's #triangles / 1000
+// alone would not open every object's root once in crytek-sponza), instanced objects 4 x #instances; or as set.
 size_t bref_capacity(const std::vector<ObjectTree>& objects, const std::vector<TwoLevelInstance>& instances,
                      const TwoLevelSettings& settings) {
     if (settings.top == TopLevel::TwoLevel) return std::max<size_t>(instances.size(), 1);
@@ -169,6 +170,7 @@ size_t bref_capacity(const std::vector<ObjectTree>& objects, const std::vector<T
     uint64_t triangles = 0;
     for (const TwoLevelInstance& i : instances) triangles += objects[i.object].triangles;
     const size_t n = instances.size();
+    if (settings.brefs_per_placement) return std::max<size_t>(n * settings.brefs_per_placement, 1);
     return std::max<size_t>(instanced ? 4 * n : n + std::max<size_t>(n, triangles / 1000), 1);
 }
 

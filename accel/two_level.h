@@ -32,7 +32,8 @@ struct TwoLevelSettings {
     BuildSettings blas;                   // their settings (leaf_block follows the kernel)
     TopLevel top = TopLevel::Rebraid;
     float open_extent = 0.1f;             // sec. 4.2: open BRefs wider than this share of the segment's extent
-    uint32_t bins = 32;
+    uint32_t bins = 32;                   // of the top level's binned SAH, 2 to 64
+    uint32_t brefs_per_placement = 0;     // sec. 5.2's BRef array size over the placements; 0: the paper's heuristic
 };
 
 // The ray's way into an instance: world to object space, or nothing for an identity placement. prim_offset is
