@@ -126,6 +126,7 @@ PlacedTriangle leaf_triangle(const TriangleBlock<W>* blocks, uint32_t first, uin
 }
 
 // The triangle of a one-triangle BRef in world space, with its scene-wide id: what the top level's own leaf holds.
+// Vertices are transformed as flatten() places a scene's triangles, so a hit on them is the flat BVH's hit.
 template <int N>
 PlacedTriangle world_triangle(const TwoLevelBvh<N>& bvh, const BRef& r) {
     PlacedTriangle t = leaf_triangle(bvh.pool.leaves.data(), r.child, r.triangle);
@@ -165,12 +166,12 @@ void append_leaf(std::vector<TriangleBlock<W>, HugePageAllocator<TriangleBlock<W
 // alone would not open every object's root once in crytek-sponza), instanced objects 4 x #instances; or as set.
 size_t bref_capacity(const std::vector<ObjectTree>& objects, const std::vector<TwoLevelInstance>& instances,
                      const TwoLevelSettings& settings) {
-    if (settings.top == TopLevel::TwoLevel) return std::max<size_t>(instances.size(), 1);
-    const bool instanced = instances.size() > objects.size();
+    const size_t n = instances.size();
+    if (settings.top == TopLevel::TwoLevel) return std::max<size_t>(n, 1);
+    if (settings.brefs_per_placement) return std::max<size_t>(n * settings.brefs_per_placement, 1);
+    const bool instanced = n > objects.size();
     uint64_t triangles = 0;
     for (const TwoLevelInstance& i : instances) triangles += objects[i.object].triangles;
-    const size_t n = instances.size();
-    if (settings.brefs_per_placement) return std::max<size_t>(n * settings.brefs_per_placement, 1);
     return std::max<size_t>(instanced ? 4 * n : n + std::max<size_t>(n, triangles / 1000), 1);
 }
 
@@ -211,7 +212,7 @@ private:
         const WideNode<N>& node = bvh_.pool.nodes[child];
         BBox out;
         for (int c = 0; c < N; ++c)
-            if (!node.is_empty(c)) out.extend(placed_box(instance, child_box(node, c)));
+            if (!node.is_empty(c)) grow(out, placed_box(instance, child_box(node, c)));
         return out;
     }
 
@@ -257,6 +258,7 @@ private:
     // go first (sec. 7 suggests prioritising by size): with the space of sec. 5.2, taking them in array order left
     // crytek-sponza at 1.07x flat, widest first at 1.00x.
     uint32_t open_wide_brefs(const Segment& s) {
+        if (s.extra_end == s.end) return s.end;  // no space (only a node of one child would fit: not worth a sort)
         const BBox bounds = bounds_of(s);
         const int dim = bounds.largest_axis();
         const float threshold = settings_.open_extent * bounds.extent()[dim];
