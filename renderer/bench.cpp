@@ -117,9 +117,10 @@ void print_table(const std::vector<Entry>& entries, uint64_t tris) {
         else std::printf("%7s ", "-");
         if (r.layout_sah) std::printf("%7.2f ", *r.layout_sah);  // eq. 1 of the traversal layout, wide nodes
         else std::printf("%7s ", "-");
-        if (r.nodes) std::printf("%9llu %9llu %7.1f ", (unsigned long long)*r.nodes, (unsigned long long)*r.leaves,
-                                 100.0 * (*r.refs_per_tri - 1.0));
-        else std::printf("%9s %9s %7s ", "-", "-", "-");
+        if (r.nodes) std::printf("%9llu %9llu ", (unsigned long long)*r.nodes, (unsigned long long)*r.leaves);
+        else std::printf("%9s %9s ", "-", "-");
+        if (r.refs_per_tri) std::printf("%7.1f ", 100.0 * (*r.refs_per_tri - 1.0));  // two-level rows have none
+        else std::printf("%7s ", "-");
         // Split pass time against this build's minimum (Table 4), reference slots allocated beyond one per triangle.
         if (r.split_ms) std::printf("%8.2f %8.1f %7.1f ", *r.split_ms, 100.0 * *r.split_ms / e.build_min(),
                                     100.0 * (*r.ref_capacity_per_tri - 1.0));
