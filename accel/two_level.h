@@ -4,6 +4,9 @@
 // place objects with affine transforms; the top level is built over BRefs (sec. 3.2): references to nodes of
 // object BVHs with their world bounds. The plain two-level top level keeps one BRef per instance, at the object
 // root; re-braiding opens BRefs where objects overlap (sec. 4), so the top level reaches into object trees.
+// Beyond the paper, re-braiding here also opens object leaves into triangles (sec. 7's future work), opens the
+// widest BRefs first, bounds a transformed node by its children's transformed boxes, and opens a transformed
+// node only where that does not add instance entries (two_level.cpp says why, with measurements).
 #include "accel/builder.h"
 #include "accel/wide_bvh.h"
 
@@ -92,7 +95,7 @@ struct TwoLevelBvh {
     std::vector<PlacedObject> instances;
     std::vector<glm::mat4> to_world;  // per instance, for metrics (traversal only needs the inverse)
     std::vector<TopLevelRef> entries;
-    uint32_t brefs = 0;  // the top level's references: direct children and entries
+    uint32_t brefs = 0;  // the BRefs in the top level's leaves
     BBox bounds;
 
     uint32_t top_level_nodes() const { return uint32_t(pool.nodes.size()) - object_nodes; }
