@@ -20,22 +20,22 @@ namespace canopy {
 
 namespace {
 
-// The float next to a finite x towards -inf (+inf), by its bits: std::nextafter is a library call, and the top
-// level transforms a thousand boxes a build.
+// The float below a finite x, by its bits and without branches (std::nextafter is a library call, and the
+// rounding of a thousand box transforms a build goes either way at random): +0 counts as -0, whose successor
+// downwards is -denorm_min; a positive float's bits step down, a negative's up.
 float next_down(float x) {
-    if (x == 0.0f) return -std::numeric_limits<float>::denorm_min();
-    const uint32_t bits = std::bit_cast<uint32_t>(x);
-    return std::bit_cast<float>(x > 0.0f ? bits - 1 : bits + 1);
+    const int32_t bits = std::bit_cast<int32_t>(x == 0.0f ? -0.0f : x);
+    return std::bit_cast<float>(bits - (1 + 2 * (bits >> 31)));
 }
 
 float round_down(double x) {
     const float f = float(x);
-    return double(f) <= x ? f : next_down(f);
+    return double(f) > x ? next_down(f) : f;
 }
 
 float round_up(double x) {
     const float f = float(x);
-    return double(f) >= x ? f : -next_down(-f);
+    return double(f) < x ? -next_down(-f) : f;
 }
 
 }  // namespace
@@ -88,6 +88,7 @@ struct BRef {
     uint32_t child, count;  // as WideNode names a child: count 0 is an inner node, count > 0 a leaf of that many
     float prims;
     uint32_t triangle = kWholeLeaf;  // of an opened leaf: the one triangle (of leaf child, count) referred to
+    float children_area = 0.0f;      // of a transformed inner node: its children's world boxes' areas summed
     bool kept = false;               // refused opening (fewer_entries): stays closed in every segment below
 
     bool one_triangle() const { return triangle != kWholeLeaf; }
@@ -126,6 +127,7 @@ PlacedTriangle leaf_triangle(const TriangleBlock<W>* blocks, uint32_t first, uin
 }
 
 // The triangle of a one-triangle BRef in world space, with its scene-wide id: what the top level's own leaf holds.
+// Vertices are transformed as flatten() places a scene's triangles, so a hit on them is the flat BVH's hit.
 template <int N>
 PlacedTriangle world_triangle(const TwoLevelBvh<N>& bvh, const BRef& r) {
     PlacedTriangle t = leaf_triangle(bvh.pool.leaves.data(), r.child, r.triangle);
@@ -161,14 +163,16 @@ void append_leaf(std::vector<TriangleBlock<W>, HugePageAllocator<TriangleBlock<W
     }
 }
 
-// Sec. 5.2: objects get #instances + max(#instances, #triangles / 1000) BRefs, instanced objects 4 x #instances.
+// Sec. 5.2: objects get #instances + max(#instances, #triangles / 1000) BRefs (the paper's #triangles / 1000
+// alone would not open every object's root once in crytek-sponza), instanced objects 4 x #instances; or as set.
 size_t bref_capacity(const std::vector<ObjectTree>& objects, const std::vector<TwoLevelInstance>& instances,
                      const TwoLevelSettings& settings) {
-    if (settings.top == TopLevel::TwoLevel) return std::max<size_t>(instances.size(), 1);
-    const bool instanced = instances.size() > objects.size();
+    const size_t n = instances.size();
+    if (settings.top == TopLevel::TwoLevel) return std::max<size_t>(n, 1);
+    if (settings.brefs_per_placement) return std::max<size_t>(n * settings.brefs_per_placement, 1);
+    const bool instanced = n > objects.size();
     uint64_t triangles = 0;
     for (const TwoLevelInstance& i : instances) triangles += objects[i.object].triangles;
-    const size_t n = instances.size();
     return std::max<size_t>(instanced ? 4 * n : n + std::max<size_t>(n, triangles / 1000), 1);
 }
 
@@ -188,7 +192,7 @@ public:
     Bvh build() {
         for (uint32_t i = 0; i < instances_.size(); ++i) {
             const ObjectTree& object = bvh_.objects[instances_[i].object];
-            brefs_[i] = {world_bounds(i, object.root, 0, object.bounds), i, object.root, 0, float(object.triangles)};
+            brefs_[i] = placed_ref(i, object.root, 0, object.bounds, float(object.triangles));
         }
         const Segment all{0, uint32_t(instances_.size()), uint32_t(brefs_.size())};
         build_segment(all, 0, 1, settings_.top == TopLevel::Rebraid, 0);
@@ -200,17 +204,23 @@ public:
     const std::vector<BRef>& brefs() const { return brefs_; }
 
 private:
-    // Sec. 5.4: a transformed node's world box is conservative, its object box transformed. Re-braiding looks into
-    // the object tree anyway, so for an inner node it takes the union of its children's transformed boxes, which
-    // is tighter: fewer rays enter an instance only to miss it (zoo-64: 13% fewer entries per ray).
-    BBox world_bounds(uint32_t instance, uint32_t child, uint32_t count, const BBox& box) const {
-        if (bvh_.instances[instance].identity) return box;
-        if (count || settings_.top == TopLevel::TwoLevel) return placed_box(instance, box);
+    // A BRef of node (child, count) of an instance's object tree, whose object box is `box`. Sec. 5.4: a
+    // transformed node's world box is conservative, its object box transformed. Re-braiding looks into the object
+    // tree anyway, so for an inner node it takes the union of its children's transformed boxes, which is tighter:
+    // fewer rays enter an instance only to miss it (zoo-64: 13% fewer entries per ray). The same boxes' areas
+    // decide whether opening it is worth the entries (fewer_entries).
+    BRef placed_ref(uint32_t instance, uint32_t child, uint32_t count, const BBox& box, float prims) const {
+        BRef r{placed_box(instance, box), instance, child, count, prims};
+        if (bvh_.instances[instance].identity || count || settings_.top == TopLevel::TwoLevel) return r;
         const WideNode<N>& node = bvh_.pool.nodes[child];
-        BBox out;
-        for (int c = 0; c < N; ++c)
-            if (!node.is_empty(c)) out.extend(placed_box(instance, child_box(node, c)));
-        return out;
+        r.bounds = BBox{};
+        for (int c = 0; c < N; ++c) {
+            if (node.is_empty(c)) continue;
+            const BBox world = placed_box(instance, child_box(node, c));
+            grow(r.bounds, world);
+            r.children_area += world.half_area();
+        }
+        return r;
     }
 
     // An object-space box in world space, conservatively.
@@ -255,6 +265,7 @@ private:
     // go first (sec. 7 suggests prioritising by size): with the space of sec. 5.2, taking them in array order left
     // crytek-sponza at 1.07x flat, widest first at 1.00x.
     uint32_t open_wide_brefs(const Segment& s) {
+        if (s.extra_end == s.end) return s.end;  // no space (only a node of one child would fit: not worth a sort)
         const BBox bounds = bounds_of(s);
         const int dim = bounds.largest_axis();
         const float threshold = settings_.open_extent * bounds.extent()[dim];
@@ -282,7 +293,7 @@ private:
         uint32_t children = 0;
         for (int c = 0; c < N; ++c) children += !node.is_empty(c);
         if (end + children - 1 > limit) return false;
-        if (!fewer_entries(parent, node)) {
+        if (!fewer_entries(parent)) {
             parent.kept = true;
             return true;
         }
@@ -291,9 +302,9 @@ private:
         bool first = true;
         for (int c = 0; c < N; ++c) {
             if (node.is_empty(c)) continue;
-            const BRef child{world_bounds(instance, node.child[c], node.count[c], child_box(node, c)), instance,
-                             node.child[c], node.count[c], estimated_prims(node, c, prims)};
-            brefs_[first ? i : end++] = child;  // the first child takes the parent's slot
+            // The first child takes the parent's slot.
+            brefs_[first ? i : end++] = placed_ref(instance, node.child[c], node.count[c], child_box(node, c),
+                                                   estimated_prims(node, c, prims));
             first = false;
         }
         return true;
@@ -318,13 +329,9 @@ private:
     // with its ray transform, for one per child box the ray hits. Such a BRef is opened only when its children's
     // transformed boxes have less area together than its own box, so the expected number of entries does not grow
     // (our addition: the paper finds transforms cheap, sec. 5.5, but on zoo-64 such openings added entries and
-    // time). Opening an identity placement's BRef costs traversal nothing.
-    bool fewer_entries(const BRef& parent, const WideNode<N>& node) const {
-        if (bvh_.instances[parent.instance].direct()) return true;
-        float area = 0.0f;
-        for (int c = 0; c < N; ++c)
-            if (!node.is_empty(c)) area += placed_box(parent.instance, child_box(node, c)).half_area();
-        return area < parent.bounds.half_area();
+    // time). An identity placement's BRefs need no ray transform, and open as the paper opens them.
+    bool fewer_entries(const BRef& parent) const {
+        return bvh_.instances[parent.instance].direct() || parent.children_area < parent.bounds.half_area();
     }
 
     // Sec. 5.3 estimates a child's triangles as the parent's divided by its children; a leaf child's count is

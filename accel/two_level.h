@@ -4,6 +4,9 @@
 // place objects with affine transforms; the top level is built over BRefs (sec. 3.2): references to nodes of
 // object BVHs with their world bounds. The plain two-level top level keeps one BRef per instance, at the object
 // root; re-braiding opens BRefs where objects overlap (sec. 4), so the top level reaches into object trees.
+// Beyond the paper, re-braiding here also opens object leaves into triangles (sec. 7's future work), opens the
+// widest BRefs first, bounds a transformed node by its children's transformed boxes, and opens a transformed
+// node only where that does not add instance entries (two_level.cpp says why, with measurements).
 #include "accel/builder.h"
 #include "accel/wide_bvh.h"
 
@@ -32,7 +35,8 @@ struct TwoLevelSettings {
     BuildSettings blas;                   // their settings (leaf_block follows the kernel)
     TopLevel top = TopLevel::Rebraid;
     float open_extent = 0.1f;             // sec. 4.2: open BRefs wider than this share of the segment's extent
-    uint32_t bins = 32;
+    uint32_t bins = 32;                   // of the top level's binned SAH, 2 to 64
+    uint32_t brefs_per_placement = 0;     // sec. 5.2's BRef array size over the placements; 0: the paper's heuristic
 };
 
 // The ray's way into an instance: world to object space, or nothing for an identity placement. prim_offset is
@@ -91,7 +95,7 @@ struct TwoLevelBvh {
     std::vector<PlacedObject> instances;
     std::vector<glm::mat4> to_world;  // per instance, for metrics (traversal only needs the inverse)
     std::vector<TopLevelRef> entries;
-    uint32_t brefs = 0;  // the top level's references: direct children and entries
+    uint32_t brefs = 0;  // the BRefs in the top level's leaves
     BBox bounds;
 
     uint32_t top_level_nodes() const { return uint32_t(pool.nodes.size()) - object_nodes; }

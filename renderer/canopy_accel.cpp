@@ -116,11 +116,17 @@ public:
     // level, every object's tree and the top level (object PrimRefs are made inside, and timed).
     void build() override {
         if (two_level_input_) {
+            TwoLevelTimes times;
             switch (width_) {
-                case 2: build_two_level_into<2>(layout_, *two_level_input_, two_level_settings_, two_level_times_); break;
-                case 4: build_two_level_into<4>(layout_, *two_level_input_, two_level_settings_, two_level_times_); break;
-                default: build_two_level_into<8>(layout_, *two_level_input_, two_level_settings_, two_level_times_); break;
+                case 2: build_two_level_into<2>(layout_, *two_level_input_, two_level_settings_, times); break;
+                case 4: build_two_level_into<4>(layout_, *two_level_input_, two_level_settings_, times); break;
+                default: build_two_level_into<8>(layout_, *two_level_input_, two_level_settings_, times); break;
             }
+            // Each part's fastest build, as the bench reports the fastest whole build: a top level of tens of
+            // microseconds timed once is mostly noise.
+            if (!two_level_built_ || times.objects_ms < two_level_times_.objects_ms) two_level_times_.objects_ms = times.objects_ms;
+            if (!two_level_built_ || times.top_level_ms < two_level_times_.top_level_ms) two_level_times_.top_level_ms = times.top_level_ms;
+            two_level_built_ = true;
             return;
         }
         binary_ = builder_.build(BuildInput{scene_.triangles, std::move(refs_)}, settings_);
@@ -219,7 +225,8 @@ private:
     AnyLayout layout_;
     std::optional<TwoLevelInput> two_level_input_;
     TwoLevelSettings two_level_settings_;
-    TwoLevelTimes two_level_times_;
+    TwoLevelTimes two_level_times_;  // the fastest builds' parts; after a move, that rebuild's
+    bool two_level_built_ = false;
 };
 
 // `--builder auto`: each build computes the scene statistics, chooses (renderer/auto_builder.h) and builds with

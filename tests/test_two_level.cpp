@@ -2,10 +2,12 @@
 // flattened world triangles, with instances rotated, scaled non-uniformly and overlapping; re-braiding is
 // deterministic; transformed boxes are conservative.
 #include "two_level_support.h"
+#include "kernels/traverse_two_level.h"
 
 #include <glm/gtc/matrix_transform.hpp>
 #include <tbb/global_control.h>
 
+#include <algorithm>
 #include <cstring>
 
 using namespace canopy;
@@ -48,6 +50,124 @@ TEST_CASE("identity instances give exactly the flat BVH's hits", "[two-level]") 
     }
 }
 
+namespace {
+
+// A room of identity objects, and "shards": one object of two far-apart hollow boxes, each of four side walls
+// (two triangles each) spanning a third of the room, placed once by the identity and once rotated, scaled
+// non-uniformly and moved. A box's walls make one leaf whose box holds the whole box, as crytek-sponza's outer
+// walls do: the leaves re-braiding opens into triangles, the transformed copy's in world space.
+Scene shard_scene() {
+    Scene scene = load_scene("gen:box?tris=1500&seed=4");
+    const BBox room = flatten(scene).bounds;
+    Mesh shards;
+    shards.name = "shards";
+    for (const float corner : {0.1f, 0.6f}) {
+        const Vec3 lower = room.lower + corner * room.extent(), size = 0.3f * room.extent();
+        for (int wall = 0; wall < 4; ++wall) {
+            const int axis = wall / 2 == 0 ? 0 : 2, across = axis == 0 ? 2 : 0;  // walls normal to x, then to z
+            Vec3 base = lower;
+            base[axis] += wall % 2 ? size[axis] : 0.0f;
+            Vec3 along(0.0f), up(0.0f);
+            along[across] = size[across], up[1] = size[1];
+            const uint32_t first = uint32_t(shards.positions.size());
+            shards.positions.insert(shards.positions.end(), {base, base + along, base + along + up, base + up});
+            shards.triangles.push_back({first, first + 1, first + 2});
+            shards.triangles.push_back({first, first + 2, first + 3});
+        }
+    }
+    shards.objects = {{"shards", 0, uint32_t(shards.triangles.size())}};
+    scene.meshes.push_back(shards);
+    glm::mat4 moved = glm::translate(glm::mat4(1.0f), room.center());
+    moved = glm::rotate(moved, 0.9f, glm::normalize(Vec3(1, 3, 2)));
+    moved = glm::scale(moved, Vec3(0.8f, 0.5f, 0.7f));
+    moved = glm::translate(moved, -room.center());
+    scene.instances.push_back({1, glm::mat4(1.0f)});
+    scene.instances.push_back({1, moved});
+    return scene;
+}
+
+// The top level's own leaves (after the object trees' in the pool): the scene-wide triangle ids they hold.
+template <int N>
+std::vector<uint32_t> top_level_triangles(const TwoLevelBvh<N>& bvh) {
+    std::vector<uint32_t> prims;
+    for (size_t i = bvh.object_leaves; i < bvh.pool.leaves.size(); ++i) {
+        if constexpr (N == 2) {
+            prims.push_back(bvh.pool.leaves[i].prim);
+        } else {
+            for (uint32_t prim : bvh.pool.leaves[i].prim)
+                if (prim != TriangleBlock<block_lanes(N)>::kNone) prims.push_back(prim);
+        }
+    }
+    return prims;
+}
+
+template <int N>
+void check_opened_leaves(const Scene& scene) {
+    const FlatScene flat = flatten(scene);
+    const TwoLevelInput input = two_level_input(scene);
+    TwoLevelSettings settings;
+    settings.blas.leaf_block = 4;  // as the renderer builds for the SIMD kernels: leaves of up to 8
+    settings.brefs_per_placement = 16;
+    const TwoLevelBvh<N> bvh = build_two_level<N>(input, settings);
+    const std::vector<uint32_t> prims = top_level_triangles(bvh);
+    const uint32_t shards = uint32_t(flat.triangles.size() - 32), moved = shards + 16;  // the last two placements
+    INFO("bvh" << N);
+    CHECK(std::count_if(prims.begin(), prims.end(), [&](uint32_t p) { return p >= shards && p < moved; }) > 0);
+    CHECK(std::count_if(prims.begin(), prims.end(), [&](uint32_t p) { return p >= moved; }) > 0);
+    // Opened triangles of the transformed placement are placed as flatten() places them; rays entering its
+    // unopened nodes still traverse in object space, hence the tolerance of the other two-level tests.
+    const std::vector<Ray> rays = random_rays(flat.triangles, 20000, 79);
+    const std::vector<Hit> expected = brute_force_all(flat.triangles, rays);
+    std::vector<Hit> actual(rays.size());
+    for (size_t i = 0; i < rays.size(); ++i) closest_hit(bvh, rays[i], actual[i]);
+    CHECK(disagreements_of(rays, expected, actual, 1e-5f * glm::length(flat.bounds.extent())) <= rays.size() / 1000);
+}
+
+}  // namespace
+
+TEST_CASE("re-braiding opens wide leaves into top-level leaves of world-space triangles", "[two-level]") {
+    const Scene scene = shard_scene();
+    check_opened_leaves<2>(scene);
+    if (kernel_compiled(4) && cpu_runs(4)) check_opened_leaves<4>(scene);
+    if (kernel_compiled(8) && cpu_runs(8)) check_opened_leaves<8>(scene);
+}
+
+TEST_CASE("instance entries may outnumber the object leaves", "[two-level]") {
+    Scene scene;
+    Mesh one;
+    one.name = "one";
+    one.positions = {Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0)};
+    one.triangles = {{0, 1, 2}};
+    one.objects = {{"one", 0, 1}};
+    scene.meshes.push_back(one);
+    for (int i = 0; i < 40; ++i)
+        scene.instances.push_back({0, glm::rotate(glm::translate(glm::mat4(1.0f), Vec3(0.3f * float(i), 0, 0)),
+                                                  0.2f * float(i), Vec3(0, 1, 0))});
+    const FlatScene flat = flatten(scene);
+    // Rays from one of these crossing triangles to another re-hit their start in object space or not, by rounding.
+    const std::vector<Ray> rays = off_surface(random_rays(flat.triangles, 5000, 80));
+    const std::vector<Hit> expected = brute_force_all(flat.triangles, rays);
+    for (const TopLevel top : {TopLevel::TwoLevel, TopLevel::Rebraid}) {
+        TwoLevelSettings settings;
+        settings.top = top;
+        const TwoLevelBvh<4> bvh = build_two_level<4>(two_level_input(scene), settings);
+        REQUIRE(bvh.entries.size() > bvh.object_leaves);
+        CHECK(bvh.pool.leaves.size() >= bvh.entries.size());  // an entry's index stays inside the leaves
+        std::vector<Hit> actual(rays.size());
+        for (size_t i = 0; i < rays.size(); ++i) closest_hit(bvh, rays[i], actual[i]);
+        CHECK(disagreements_of(rays, expected, actual, 1e-5f * glm::length(flat.bounds.extent())) <= rays.size() / 1000);
+    }
+}
+
+TEST_CASE("the top level's bins must fit its binning", "[two-level]") {
+    const TwoLevelInput input = two_level_input(instanced_scene());
+    for (uint32_t bins : {0u, 1u, 65u}) {
+        TwoLevelSettings settings;
+        settings.bins = bins;
+        CHECK_THROWS_AS(build_two_level<4>(input, settings), std::invalid_argument);
+    }
+}
+
 TEST_CASE("the re-braided top level is the same with 1 and 2 threads", "[two-level]") {
     const TwoLevelInput input = two_level_input(instanced_scene());
     auto build = [&](int threads) {
@@ -60,6 +180,9 @@ TEST_CASE("the re-braided top level is the same with 1 and 2 threads", "[two-lev
     CHECK(one.brefs > input.instances.size());  // overlapping instances were opened
     CHECK(std::memcmp(one.pool.nodes.data(), two.pool.nodes.data(), one.pool.nodes.size() * sizeof(WideNode<4>)) == 0);
     CHECK(std::memcmp(one.entries.data(), two.entries.data(), one.entries.size() * sizeof(TopLevelRef)) == 0);
+    REQUIRE(one.pool.leaves.size() == two.pool.leaves.size());
+    CHECK(one.pool.leaves.size() > one.object_leaves);  // leaves were opened into the top level's own
+    CHECK(std::memcmp(one.pool.leaves.data(), two.pool.leaves.data(), one.pool.leaves.size() * sizeof(one.pool.leaves[0])) == 0);
 }
 
 TEST_CASE("re-braiding lowers the SAH of the plain two-level top level", "[two-level]") {

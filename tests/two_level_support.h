@@ -31,15 +31,22 @@ inline Scene instanced_scene() {
 // rounding of transformed rays (object space) against transformed vertices (world space). Rays that start on a
 // surface (one in four of random_rays) may or may not re-hit it at t ~ 1e-7 depending on that rounding: those
 // within `touch` of their origin are not compared (the renderer offsets such origins, section 3.9 of pbrt).
-inline size_t disagreements(const Accelerator& accel, const std::vector<Ray>& rays, const std::vector<Hit>& expected, float touch) {
+inline size_t disagreements_of(const std::vector<Ray>& rays, const std::vector<Hit>& expected,
+                               const std::vector<Hit>& actual, float touch) {
     size_t bad = 0;
     for (size_t i = 0; i < rays.size(); ++i) {
-        const Hit hit = accel.trace(rays[i]);
+        const Hit& hit = actual[i];
         if ((hit.found() && hit.t < touch) || (expected[i].found() && expected[i].t < touch)) continue;
         if (hit.found() != expected[i].found()) ++bad;
         else if (hit.found() && hit.prim != expected[i].prim && std::abs(hit.t - expected[i].t) > 1e-4f * expected[i].t) ++bad;
     }
     return bad;
+}
+
+inline size_t disagreements(const Accelerator& accel, const std::vector<Ray>& rays, const std::vector<Hit>& expected, float touch) {
+    std::vector<Hit> actual(rays.size());
+    for (size_t i = 0; i < rays.size(); ++i) actual[i] = accel.trace(rays[i]);
+    return disagreements_of(rays, expected, actual, touch);
 }
 
 }  // namespace canopy::test
