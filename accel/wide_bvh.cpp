@@ -259,6 +259,7 @@ void put_triangle(TriangleBlock<W>& block, uint32_t lane, uint32_t prim, const T
 template <int N>
 struct TriangleLeaves {
     static constexpr bool kSharesBlocks = N > 2;
+    static constexpr uint32_t kLanes = uint32_t(block_lanes(N));
     WideBvh<N>& out;
     const Bvh& bvh;
     std::span<const Triangle> triangles;
@@ -278,10 +279,10 @@ struct TriangleLeaves {
             if constexpr (N == 2)
                 put_triangle(out.leaves[run.first_entry + i], prim, triangles[prim]);
             else
-                put_triangle(out.leaves[run.first_entry + i / N], i % N, prim, triangles[prim]);
+                put_triangle(out.leaves[run.first_entry + i / kLanes], i % kLanes, prim, triangles[prim]);
         }
         if constexpr (N > 2)
-            if (run.count % N) pad(run.first_entry + run.count / N, run.count % N);
+            if (run.count % kLanes) pad(run.first_entry + run.count / kLanes, run.count % kLanes);
     }
 
     void shared(uint32_t entry, uint32_t lane, uint32_t ref) {
@@ -291,8 +292,8 @@ struct TriangleLeaves {
 
     // Lanes past the last triangle: a degenerate triangle at the origin, never hit.
     void pad(uint32_t entry, uint32_t from_lane) {
-        for (uint32_t lane = from_lane; lane < uint32_t(N); ++lane)
-            put_triangle(out.leaves[entry], lane, TriangleBlock<N>::kNone, Triangle{Vec3(0), Vec3(0), Vec3(0)});
+        for (uint32_t lane = from_lane; lane < kLanes; ++lane)
+            put_triangle(out.leaves[entry], lane, WideBvh<N>::Leaf::kNone, Triangle{Vec3(0), Vec3(0), Vec3(0)});
     }
 };
 

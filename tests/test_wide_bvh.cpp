@@ -201,9 +201,14 @@ TEST_CASE("one-triangle leaves of a wide node share a block, a lane each in chil
     const WideNode<4>& root = wide.nodes[0];
     CHECK(std::vector<uint32_t>(root.child, root.child + 4) == std::vector<uint32_t>{0, 0, 1, 0});
     CHECK(std::vector<uint32_t>(root.count, root.count + 4) == std::vector<uint32_t>{1, 1, 2, 1});
-    const TriangleBlock<4>& shared = wide.leaves[0];
-    CHECK(std::vector<uint32_t>(shared.prim, shared.prim + 4) == std::vector<uint32_t>{0, 3, 4, kNoPrim});
-    CHECK(std::vector<uint32_t>(wide.leaves[1].prim, wide.leaves[1].prim + 4) == std::vector<uint32_t>{1, 2, kNoPrim, kNoPrim});
+    constexpr int kLanes = block_lanes(4);
+    auto lanes = [&](std::vector<uint32_t> prims) {  // padded with kNoPrim to the block's lanes
+        prims.resize(size_t(kLanes), kNoPrim);
+        return prims;
+    };
+    const LeafOf<4>& shared = wide.leaves[0];
+    CHECK(std::vector<uint32_t>(shared.prim, shared.prim + kLanes) == lanes({0, 3, 4}));
+    CHECK(std::vector<uint32_t>(wide.leaves[1].prim, wide.leaves[1].prim + kLanes) == lanes({1, 2}));
     // Its own triangle is found through each leaf child, and the traced hit is the same as without sharing.
     Hit hit;
     CHECK(closest_hit(wide, Ray{{4.1f, 0.1f, 1.0f}, {0, 0, -1}}, hit));
