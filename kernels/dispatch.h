@@ -1,6 +1,8 @@
 #pragma once
 // Kernel choice at run time: which widths this build compiled (they need their instruction sets at compile
 // time) and which the CPU runs. The default is the widest kernel available on both counts.
+#include "accel/wide_bvh.h"
+
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -15,7 +17,7 @@ struct KernelInfo {
 
 inline const std::vector<KernelInfo>& kernel_infos() {
     static const std::vector<KernelInfo> kernels = {
-        {"bvh2", 2, "x86-64 (scalar)"}, {"bvh4", 4, "SSE4.2 and FMA"}, {"bvh8", 8, "AVX2 and FMA"}};
+        {"bvh2", 2, "x86-64 (scalar)"}, {"bvh4", 4, block_lanes(4) == 8 ? "SSE4.2, FMA and AVX2 (8-lane leaf tests)" : "SSE4.2 and FMA"}, {"bvh8", 8, "AVX2 and FMA"}};
     return kernels;
 }
 
@@ -35,7 +37,10 @@ constexpr bool kernel_compiled(int width) {
 
 inline bool cpu_runs(int width) {
     if (width == 2) return true;
-    if (width == 4) return __builtin_cpu_supports("sse4.2") && __builtin_cpu_supports("fma");
+    if (width == 4) {  // its leaves take AVX when the build has it (block_lanes)
+        const bool leaves = block_lanes(4) == 4 || __builtin_cpu_supports("avx2");
+        return __builtin_cpu_supports("sse4.2") && __builtin_cpu_supports("fma") && leaves;
+    }
     return width == 8 && __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
 }
 
