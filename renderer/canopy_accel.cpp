@@ -77,8 +77,8 @@ public:
     // `objects` is the scene whose objects and instances a two-level top level is built over; null for flat.
     CanopyAccelerator(const Scene* objects, const FlatScene& scene, const CanopyOptions& options)
         : scene_(scene), options_(options), builder_(find_builder(options.builder)), width_(kernel_width(options.kernel)) {
-        // SAH charges a leaf one test per 4 triangles for the SIMD kernels, although BVH8 tests 8 at once: on
-        // crytek-sponza that tree traces 4% faster than one charged per 8 (bvh8 frame / Embree 1.30 against 1.36).
+        // SAH charges a leaf one test per 4 triangles for the SIMD kernels although they test 8 at once: on
+        // crytek-sponza that tree traced faster than one charged per 8 (bvh8 / Embree 1.29 against 1.36, two runs each).
         if (width_ > 2) settings_.leaf_block = 4;
         if (!options.start.empty()) {
             if (!builder_.default_start)
