@@ -164,7 +164,7 @@ TEST_CASE("the motion is deterministic, rigid, closed and stays inside the scene
     }
 }
 
-TEST_CASE("--dynamic chooses by auto, index or name, in two_level_input's numbering, and names itself when wrong",
+TEST_CASE("The --dynamic option chooses by auto, index or name, in two_level_input's numbering, and names itself when wrong",
           "[dynamic]") {
     Scene scene = room_scene();
     const FlatScene flat = flatten(scene);
