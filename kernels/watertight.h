@@ -121,7 +121,7 @@ private:
 
     struct {
         simd::Broadcast org[3], sx, sy, sz;
-    } lanes_;  // broadcast once per ray: per block, the broadcasts cost 5% of a frame (measured on crytek-sponza)
+    } lanes_;  // broadcast once per ray, not per block: a block test is the hot path of every leaf visit
     Vec3 org_;
     int kx_, ky_, kz_;
     float sx_, sy_, sz_;
