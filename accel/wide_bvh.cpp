@@ -27,6 +27,7 @@ template <int N>
 struct WideChildren {
     std::array<uint32_t, N> node;
     int count = 0;
+    uint32_t merged = 0;  // bit i: inner child i is written as one leaf of its subtree's triangles (Collapser)
 
     WideChildren(const Bvh& bvh, uint32_t index) {
         std::array<float, N> area;           // half area of an inner child; -1 for a leaf, never opened
@@ -62,18 +63,24 @@ struct WideChildren {
 // every subtree's extent, keeping the wide nodes of each subtree below the top levels in depth-first order; the
 // second writes the top levels and then replays those subtrees concurrently, each from its own cursor, without
 // opening binary nodes again.
+//
+// With shared blocks, an inner child whose binary subtree is at most a block's lanes of one-triangle leaves is
+// written as one leaf of those triangles, in the subtree's depth-first order: its wide node would hold only
+// those leaves, and a ray that reaches it pays a node test for the box tests the block test makes anyway. On
+// crytek-sponza's LBVH (one triangle per leaf) that is 81% of the BVH8 nodes.
 template <int N, class LeafSink>
 class Collapser {
 public:
     Collapser(const Bvh& bvh, WideNodes<N>& nodes, uint32_t (*entries)(int, uint32_t), LeafSink& sink)
         : bvh_(bvh), nodes_(nodes), entries_(entries), sink_(sink),
           top_depth_(bvh.nodes.size() < kParallelNodes ? 0 : kTopDepth),
-          top_extents_(slot_of(top_depth_ + 1, 0)), subtrees_(slot_of(top_depth_ + 1, 0) - slot_of(top_depth_, 0)) {}
+          top_extents_(slot_of(top_depth_ + 1, 0)), top_merged_(top_extents_.size()), subtrees_(slot_of(top_depth_ + 1, 0) - slot_of(top_depth_, 0)) {}
 
     // Returns the extent of the whole tree; the sink is told it (`reserve`) before any leaf arrives.
     Extent run() {
         const bool lone_leaf = bvh_.nodes[0].is_leaf();
-        const Extent total = lone_leaf ? own_extent(WideChildren<N>(0)) : measure(0, 0, 0);
+        uint32_t root_merged = 0;  // the root is a node whatever its subtree
+        const Extent total = lone_leaf ? own_extent(WideChildren<N>(0)) : measure(0, 0, 0, root_merged);
         nodes_.clear();
         nodes_.resize(total.nodes);
         sink_.reserve(total);
@@ -91,6 +98,7 @@ private:
     // Wide levels above the subtrees that are measured and written concurrently: 2^8 or 2^9 subtrees at any width.
     static constexpr uint32_t kTopDepth = 9 / std::bit_width(unsigned(N - 1));
     static constexpr uint32_t kLanes = uint32_t(block_lanes(N));
+    static constexpr bool kMerges = LeafSink::kSharesBlocks;
 
     // Index of the top-level node at `depth` reached by child choices `path` (base N digits), in level order.
     static uint32_t slot_of(uint32_t depth, uint32_t path) {
@@ -99,29 +107,70 @@ private:
         return first + path;
     }
 
-    // The extent of the wide subtree rooted at inner binary node `index`, reached from the root by `path`.
-    Extent measure(uint32_t index, uint32_t depth, uint32_t path) {
-        if (depth == top_depth_) return record(index, subtrees_[path]);
-        const WideChildren<N> children(bvh_, index);
+    // The extent of the wide subtree rooted at inner binary node `index`, reached from the root by `path`;
+    // `merged` is set to its triangles when its parent writes it as one leaf, else 0.
+    Extent measure(uint32_t index, uint32_t depth, uint32_t path, uint32_t& merged) {
+        if (depth == top_depth_) return record(index, subtrees_[path], merged);
+        WideChildren<N> children(bvh_, index);
         parallel::for_each(size_t(children.count), 1, [&](size_t i) {
-            const uint32_t child = children.node[i];
-            if (!bvh_.nodes[child].is_leaf())
-                top_extents_[slot_of(depth + 1, path * N + uint32_t(i))] = measure(child, depth + 1, path * N + uint32_t(i));
+            const uint32_t child = children.node[i], slot = slot_of(depth + 1, path * N + uint32_t(i));
+            if (!bvh_.nodes[child].is_leaf()) top_extents_[slot] = measure(child, depth + 1, path * N + uint32_t(i), top_merged_[slot]);
         });
+        const std::array<uint32_t, N> triangles = merged_children(children, depth, path);
         Extent total = own_extent(children);
         for (int i = 0; i < children.count; ++i)
-            if (!bvh_.nodes[children.node[i]].is_leaf()) total += top_extents_[slot_of(depth + 1, path * N + uint32_t(i))];
+            if (!bvh_.nodes[children.node[i]].is_leaf() && !triangles[i]) total += top_extents_[slot_of(depth + 1, path * N + uint32_t(i))];
+        merged = mergeable_triangles(children, triangles);
         return total;
     }
 
+    // Marks the top-level children that measure() found mergeable; returns their triangles (0 for the others).
+    std::array<uint32_t, N> merged_children(WideChildren<N>& children, uint32_t depth, uint32_t path) const {
+        std::array<uint32_t, N> triangles{};
+        for (int i = 0; i < children.count; ++i) {
+            if (bvh_.nodes[children.node[i]].is_leaf()) continue;
+            triangles[i] = top_merged_[slot_of(depth + 1, path * N + uint32_t(i))];
+            if (triangles[i]) children.merged |= 1u << i;
+        }
+        return triangles;
+    }
+
     // Measures a subtree below the top levels, appending its wide nodes' children in depth-first order.
-    Extent record(uint32_t index, std::vector<WideChildren<N>>& out) {
+    Extent record(uint32_t index, std::vector<WideChildren<N>>& out, uint32_t& merged) {
+        const size_t self = out.size();
         out.emplace_back(bvh_, index);
         const WideChildren<N> children = out.back();
-        Extent total = own_extent(children);
-        for (int i = 0; i < children.count; ++i)
-            if (!bvh_.nodes[children.node[i]].is_leaf()) total += record(children.node[i], out);
+        std::array<uint32_t, N> triangles{};
+        Extent total{0, 0, 0};
+        for (int i = 0; i < children.count; ++i) {
+            if (bvh_.nodes[children.node[i]].is_leaf()) continue;
+            const Extent child = record(children.node[i], out, triangles[i]);
+            if (triangles[i]) {
+                out.pop_back();  // a node of leaves only: its record is the last one
+                out[self].merged |= 1u << i;
+            } else {
+                total += child;
+            }
+        }
+        total += own_extent(out[self]);
+        merged = mergeable_triangles(out[self], triangles);
         return total;
+    }
+
+    // The triangles of a wide node whose children are all one-triangle leaves or merged leaves, at most a
+    // block's lanes of them: its parent writes it as one leaf. 0 for any other node.
+    uint32_t mergeable_triangles(const WideChildren<N>& children, const std::array<uint32_t, N>& merged) const {
+        if constexpr (!kMerges) return 0;
+        uint32_t triangles = 0;
+        for (int i = 0; i < children.count; ++i) {
+            if (children.merged >> i & 1)
+                triangles += merged[i];
+            else if (bvh_.nodes[children.node[i]].count == 1)
+                ++triangles;
+            else
+                return 0;
+        }
+        return triangles <= kLanes ? triangles : 0;
     }
 
     // What a wide node takes itself: its slot, its leaves and their entries.
@@ -130,6 +179,10 @@ private:
         uint32_t shared = 0;
         for (int i = 0; i < children.count; ++i) {
             const BvhNode& c = bvh_.nodes[children.node[i]];
+            if (children.merged >> i & 1) {
+                ++own.leaves, ++own.entries;
+                continue;
+            }
             if (!c.is_leaf()) continue;
             ++own.leaves;
             if (shares_block(c))
@@ -145,7 +198,8 @@ private:
     // inner child's subtree starts where its earlier siblings' extents end, so they are written concurrently.
     void fill(uint32_t index, uint32_t self, uint32_t depth, uint32_t path, Cursor at) {
         if (depth == top_depth_) return replay(subtrees_[path], self, at);
-        const WideChildren<N> children(bvh_, index);
+        WideChildren<N> children(bvh_, index);
+        merged_children(children, depth, path);
         write_node(children, self, at);
         std::array<Cursor, N> start;
         for (int i = 0; i < children.count; ++i) {
@@ -198,7 +252,13 @@ private:
             const BvhNode& c = bvh_.nodes[children.node[i]];
             set_box(node, i, c.bounds);
             node.count[i] = c.count;
-            if (!c.is_leaf()) {
+            if (children.merged >> i & 1) {
+                if constexpr (kMerges) {
+                    node.child[i] = at.entries++;
+                    node.count[i] = sink_.gathered(node.child[i], subtree_refs(children.node[i]));
+                    ++at.leaves;
+                }
+            } else if (!c.is_leaf()) {
                 node.child[i] = at.nodes++;
             } else if (shares_block(c)) {
                 if (shared_lanes == kLanes) shared_block = at.entries++, shared_lanes = 0;
@@ -216,6 +276,27 @@ private:
             if (shared_lanes < kLanes) sink_.pad(shared_block, shared_lanes);
     }
 
+    // The refs of a merged subtree's one-triangle leaves, in depth-first order; kNone past the last.
+    std::array<uint32_t, kLanes> subtree_refs(uint32_t index) const {
+        std::array<uint32_t, kLanes> refs;
+        refs.fill(kNone);
+        std::array<uint32_t, 2 * kLanes> stack;
+        uint32_t n = 0;
+        int sp = 0;
+        stack[sp++] = index;
+        while (sp) {
+            const BvhNode& node = bvh_.nodes[stack[--sp]];
+            if (node.is_leaf()) {
+                refs[n++] = node.index;
+            } else {
+                stack[sp++] = node.index + 1;
+                stack[sp++] = node.index;
+            }
+        }
+        return refs;
+    }
+    static constexpr uint32_t kNone = 0xffffffffu;
+
     static bool shares_block(const BvhNode& c) { return LeafSink::kSharesBlocks && c.count == 1; }
 
     static void set_box(WideNode<N>& node, int i, const BBox& box) {
@@ -231,6 +312,7 @@ private:
     LeafSink& sink_;
     const uint32_t top_depth_;
     std::vector<Extent> top_extents_;                      // by top-level slot (slot_of)
+    std::vector<uint32_t> top_merged_;                     // by top-level slot: measure()'s `merged`
     std::vector<std::vector<WideChildren<N>>> subtrees_;  // by path at top_depth_: recorded wide nodes
 };
 
@@ -283,6 +365,17 @@ struct TriangleLeaves {
         }
         if constexpr (N > 2)
             if (run.count % kLanes) pad(run.first_entry + run.count / kLanes, run.count % kLanes);
+    }
+
+    // A merged subtree's triangles (refs up to the first kNone) in one block; returns how many.
+    uint32_t gathered(uint32_t entry, const std::array<uint32_t, kLanes>& refs) {
+        uint32_t lane = 0;
+        for (; lane < kLanes && refs[lane] != 0xffffffffu; ++lane) {
+            const uint32_t prim = bvh.refs[refs[lane]];
+            put_triangle(out.leaves[entry], lane, prim, triangles[prim]);
+        }
+        pad(entry, lane);
+        return lane;
     }
 
     void shared(uint32_t entry, uint32_t lane, uint32_t ref) {

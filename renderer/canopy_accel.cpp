@@ -109,7 +109,15 @@ public:
     std::string quality() const override { return ""; }
 
     void prepare() override {
+        release();
         if (!two_level_input_) refs_ = make_prim_refs(scene_.triangles);
+    }
+
+    // Frees the previous build. prepare() does it untimed, as the Embree rows release their previous scene in
+    // theirs: freeing tens of MB is no part of building.
+    void release() {
+        layout_ = AnyLayout{};
+        binary_ = Bvh{};
     }
 
     // The timed build: the builder's binary BVH and its collapse into the kernel's layout; for a two-level top
@@ -245,7 +253,9 @@ public:
     std::string reason() const override { return choice_.reason; }
     int frames_planned() const override { return options_.frames_planned; }
 
-    void prepare() override {}
+    void prepare() override {
+        if (chosen_) chosen_->release();
+    }
 
     void build() override {
         const AutoChoice choice = choose_builder(scene_statistics(scene_, flat_), options_.frames_planned, options_.pixels);
@@ -282,7 +292,7 @@ private:
     const FlatScene& flat_;
     CanopyOptions options_;
     AutoChoice choice_;
-    std::unique_ptr<Accelerator> chosen_;
+    std::unique_ptr<CanopyAccelerator> chosen_;
 };
 
 }  // namespace

@@ -4,6 +4,7 @@
 
 #include <tbb/global_control.h>
 
+#include <algorithm>
 #include <cstring>
 
 using namespace canopy;
@@ -17,7 +18,8 @@ constexpr uint32_t kNoPrim = 0xffffffffu;
 // node's children, the inner one of largest area opened until there are N (ties to the first); its inner
 // children take consecutive slots, then each one's subtree follows in turn; leaves take entries in the order
 // their parents are written. With `triangles`, leaves are filled with them, and with blocks (N > 2) the
-// one-triangle leaves of a node share blocks, a lane each; without, each leaf is a run.
+// one-triangle leaves of a node share blocks, a lane each, and an inner child whose subtree is at most a block's
+// lanes of one-triangle leaves is one leaf of them in depth-first order; without, each leaf is a run.
 template <int N>
 struct SerialCollapse {
     using Leaf = LeafOf<N>;
@@ -65,11 +67,17 @@ struct SerialCollapse {
         for (size_t i = 0; i < children.size(); ++i) {
             const BvhNode& c = bvh.nodes[children[i]];
             node.count[i] = c.count;
-            if (!c.is_leaf()) {
+            const std::vector<uint32_t> small = blocks() ? small_subtree_refs(children[i]) : std::vector<uint32_t>{};
+            if (!small.empty()) {
+                node.child[i] = entries;
+                node.count[i] = uint32_t(small.size());
+                add_blocks(1);
+                for (uint32_t k = 0; k < small.size(); ++k) put(node.child[i], k, bvh.refs[small[k]]);
+            } else if (!c.is_leaf()) {
                 node.child[i] = uint32_t(nodes.size() + inner.size());
                 inner.push_back(children[i]);
                 slots.push_back(node.child[i]);
-            } else if (!triangles.empty() && N > 2 && c.count == 1) {
+            } else if (blocks() && c.count == 1) {
                 if (shared_lanes == kLanes) shared_block = entries, shared_lanes = 0, add_blocks(1);
                 node.child[i] = shared_block;
                 put(shared_block, shared_lanes++, bvh.refs[c.index]);
@@ -83,6 +91,23 @@ struct SerialCollapse {
         nodes.resize(nodes.size() + inner.size());
         nodes[self] = node;
         for (size_t k = 0; k < inner.size(); ++k) write(slots[k], open(inner[k]));
+    }
+
+    bool blocks() const { return !triangles.empty() && N > 2; }
+
+    // The refs of an inner node's subtree in depth-first order when it is at most kLanes one-triangle leaves.
+    std::vector<uint32_t> small_subtree_refs(uint32_t index) const {
+        std::vector<uint32_t> refs;
+        if (bvh.nodes[index].is_leaf() || !one_triangle_leaves(index, refs) || refs.size() > kLanes) return {};
+        return refs;
+    }
+    bool one_triangle_leaves(uint32_t index, std::vector<uint32_t>& refs) const {
+        const BvhNode& n = bvh.nodes[index];
+        if (n.is_leaf()) {
+            refs.push_back(n.index);
+            return n.count == 1;
+        }
+        return one_triangle_leaves(n.index, refs) && one_triangle_leaves(n.index + 1, refs);
     }
 
     // Appends leaf entries, every lane empty: prim none, a degenerate triangle at the origin.
@@ -213,4 +238,44 @@ TEST_CASE("one-triangle leaves of a wide node share a block, a lane each in chil
     Hit hit;
     CHECK(closest_hit(wide, Ray{{4.1f, 0.1f, 1.0f}, {0, 0, -1}}, hit));
     CHECK(hit.prim == 4);
+}
+
+TEST_CASE("an inner child of at most a block's lanes of one-triangle leaves is one leaf", "[builders][collapse]") {
+    // Root over nodes 1 and 2; node 1 over 3 and 4, node 2 over 5 and 6, which width 4 opens into its children.
+    // Nodes 3, 5 and 6 hold two one-triangle leaves each: each is written as one leaf of two triangles. Node 4
+    // holds a two-triangle leaf, so it stays a wide node.
+    std::vector<Triangle> tris;
+    for (int i = 0; i < 9; ++i) tris.push_back({Vec3(float(i), 0, 0), Vec3(float(i) + 0.5f, 0, 0), Vec3(float(i), 0.5f, 0)});
+    auto box = [&](int first, int last) {
+        BBox b;
+        for (int i = first; i <= last; ++i) b.extend(BBox::of(tris[size_t(i)]));
+        return b;
+    };
+    Bvh bvh;
+    bvh.refs = {0, 1, 2, 3, 4, 5, 6, 7, 8};
+    bvh.nodes = {{box(0, 8), 1, 0},                        // 0
+                 {box(0, 4), 3, 0}, {box(5, 8), 5, 0},     // 1, 2
+                 {box(0, 1), 7, 0}, {box(2, 4), 9, 0},     // 3, 4
+                 {box(5, 6), 11, 0}, {box(7, 8), 13, 0},   // 5, 6
+                 {box(0, 0), 0, 1}, {box(1, 1), 1, 1},     // 7, 8: under 3
+                 {box(2, 3), 2, 2}, {box(4, 4), 4, 1},     // 9, 10: under 4
+                 {box(5, 5), 5, 1}, {box(6, 6), 6, 1},     // 11, 12: under 5
+                 {box(7, 7), 7, 1}, {box(8, 8), 8, 1}};    // 13, 14: under 6
+    check_against_serial<4>(bvh, tris, "merged subtrees");
+    check_against_serial<8>(bvh, tris, "merged subtrees");
+
+    const WideBvh<4> wide = collapse<4>(bvh, tris);
+    REQUIRE(wide.nodes.size() == 2);
+    const WideNode<4>& root = wide.nodes[0];
+    std::vector<uint32_t> counts(root.count, root.count + 4);
+    std::sort(counts.begin(), counts.end());
+    CHECK(counts == std::vector<uint32_t>{0, 2, 2, 2});  // node 4 inner; 3, 5 and 6 merged
+    for (int i = 0; i < 4; ++i) {
+        if (!root.is_leaf(i)) continue;
+        const TriangleBlock<block_lanes(4)>& block = wide.leaves[root.child[i]];
+        CHECK(block.prim[1] == block.prim[0] + 1);  // depth-first order
+        CHECK(block.prim[2] == kNoPrim);
+    }
+    // Width 8 opens everything into the root but nine triangles exceed a block: no merge, the root's leaves.
+    CHECK(collapse<8>(bvh, tris).nodes.size() == 1);
 }
