@@ -127,11 +127,10 @@ struct StackEntry {
 };
 
 // Prefetches every cache line of a node (one for BVH2, two for BVH4, four for BVH8), or a leaf's first lines.
-template <class Tree>
-inline void prefetch(const Tree& tree, const StackEntry& e) {
-    const char* p = e.count == 0 ? reinterpret_cast<const char*>(&tree.nodes[e.child])
-                                 : reinterpret_cast<const char*>(&tree.leaves[e.child]);
-    for (size_t line = 0; line < sizeof(tree.nodes[0]); line += 64) _mm_prefetch(p + line, _MM_HINT_T0);
+template <int N, class Leaf>
+inline void prefetch(const WideNode<N>* nodes, const Leaf* leaves, const StackEntry& e) {
+    const char* p = e.count == 0 ? reinterpret_cast<const char*>(nodes + e.child) : reinterpret_cast<const char*>(leaves + e.child);
+    for (size_t line = 0; line < sizeof(WideNode<N>); line += 64) _mm_prefetch(p + line, _MM_HINT_T0);
 }
 
 // Intersects a leaf's triangles; true when a hit was recorded.
@@ -164,7 +163,10 @@ using NodeRay = std::conditional_t<N == 2, SlabRay<N>, SlabLanes<N>>;
 template <Query Q, bool Robust, int N, class Tree, class Counter, class LeafFn>
 bool traverse_from(const Tree& tree, StackEntry start, const SlabRay<N>& box_ray, float tmin, Hit& hit,
                    Counter& counter, LeafFn&& leaf) {
-    // Locals the loop's stores cannot alias, so the compiler keeps them in registers.
+    // Locals the loop's stores cannot alias, so the compiler keeps them in registers (a node's address is then one
+    // multiply-add away, not two dependent loads through `tree`).
+    const WideNode<N>* const nodes = tree.nodes.data();
+    const auto* const leaves = tree.leaves.data();
     const NodeRay<N> ray(box_ray);
     const auto t_min = [&] {
         if constexpr (N == 2) return tmin;
@@ -177,7 +179,7 @@ bool traverse_from(const Tree& tree, StackEntry start, const SlabRay<N>& box_ray
     for (;;) {
         if (current.count == 0) {
             counter.inner();
-            const WideNode<N>& node = tree.nodes[current.child];
+            const WideNode<N>& node = nodes[current.child];
             std::array<float, N> tnear;
             uint32_t mask = intersect_children<Robust, N>(node, ray, t_min, tfar, tnear);
             if (mask) {
@@ -192,7 +194,7 @@ bool traverse_from(const Tree& tree, StackEntry start, const SlabRay<N>& box_ray
                 if (!mask) {  // two: go to the nearer, keep the farther
                     const int near = tnear[b] < tnear[a] ? b : a, far = near == a ? b : a;
                     *sp = {node.child[far], node.count[far], tnear[far]};
-                    prefetch(tree, *sp++);  // its fetch overlaps the near subtree's work
+                    prefetch(nodes, leaves, *sp++);  // its fetch overlaps the near subtree's work
                     current = {node.child[near], node.count[near], tnear[near]};
                     continue;
                 }
@@ -200,7 +202,7 @@ bool traverse_from(const Tree& tree, StackEntry start, const SlabRay<N>& box_ray
                 StackEntry* const base = sp;
                 const auto push = [&](int i) {
                     const StackEntry e{node.child[i], node.count[i], tnear[i]};
-                    prefetch(tree, e);
+                    prefetch(nodes, leaves, e);
                     StackEntry* j = sp++;
                     for (; j > base && j[-1].tnear < e.tnear; --j) *j = j[-1];
                     *j = e;
