@@ -61,7 +61,7 @@ std::vector<Entry> make_entries(const Scene& scene, const FlatScene& flat, const
     std::vector<Entry> entries;
     const uint64_t pixels = uint64_t(o.width) * uint64_t(o.height);
     for (const std::string& toplevel : o.toplevels)
-        for (const std::string& builder : o.builders)
+        for (const std::string& builder : toplevel == "flat" || o.blas_builders.empty() ? o.builders : o.blas_builders)
             for (const std::string& kernel : o.kernels)
                 for (const std::string& traversal : o.traversals)
                     for (const std::string& intersector : o.intersectors) {

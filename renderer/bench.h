@@ -11,6 +11,7 @@ struct BenchOptions {
     std::string start;  // start tree of the optimisers among the builders ("" for each one's default)
     std::vector<std::string> kernels{"auto"};
     std::vector<std::string> toplevels{"flat"};  // flat, two-level, rebraid
+    std::vector<std::string> blas_builders;  // object BVH builders of the two-level rows; empty: `builders`
     std::vector<std::string> traversals{"robust"};      // robust, fast
     std::vector<std::string> intersectors{"watertight"};  // watertight, moller
     std::vector<std::string> embree_qualities;  // empty: no Embree rows

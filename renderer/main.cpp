@@ -12,6 +12,7 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <algorithm>
 #include <cstdio>
 #include <memory>
 #include <optional>
@@ -23,6 +24,7 @@ using namespace canopy;
 struct RenderOptions {
     std::string scene, output = "canopy.exr", builder = "binned", start, kernel = "auto", accel = "canopy";
     std::string toplevel = "flat";
+    std::string blas_builder;  // two-level top levels: the object trees' builder ("" for --builder)
     int frames_planned = 0;
     std::string embree_quality = "medium";
     int spp = 1, threads = 0, bounces = 8;
@@ -43,7 +45,22 @@ void print_progress(float fraction) {
                  int(fraction * 100.0f + 0.5f));
 }
 
-void run_render(const RenderOptions& o) {
+// --blas-builder names the object trees' builder, which only two-level top levels have.
+void check_blas_builder(const std::string& blas, const std::vector<std::string>& toplevels) {
+    if (blas.empty()) return;
+    if (std::none_of(toplevels.begin(), toplevels.end(), [](const std::string& t) { return t != "flat"; }))
+        throw std::invalid_argument("--blas-builder " + blas + ": only --toplevel two-level or rebraid has object BVHs");
+    if (blas == "auto") throw std::invalid_argument("--blas-builder auto: auto chooses a whole accelerator, not an object BVH builder");
+    try {
+        find_builder(blas);
+    } catch (const std::invalid_argument& e) {
+        throw std::invalid_argument(std::string("--blas-builder: ") + e.what());
+    }
+}
+
+void run_render(RenderOptions o) {
+    check_blas_builder(o.blas_builder, {o.toplevel});
+    if (!o.blas_builder.empty()) o.builder = o.blas_builder;  // a two-level render has no flat BVH
     const Scene scene = load_scene(o.scene);
     const FlatScene flat = flatten(scene);
     std::unique_ptr<Accelerator> accel =
@@ -105,6 +122,7 @@ int main(int argc, char** argv) {
     render->add_option("--start", r.start, "Optimisers: builder of the start tree (default: the optimiser's own)");
     render->add_option("--toplevel", r.toplevel, "flat, two-level or rebraid")
         ->check(CLI::IsMember({"flat", "two-level", "rebraid"}))->capture_default_str();
+    render->add_option("--blas-builder", r.blas_builder, "Two-level top levels: builder of every object BVH (default: --builder)");
     render->add_option("--frames-planned", r.frames_planned, "Frames that --builder auto plans for (default: --spp)")
         ->check(CLI::Range(1, 1 << 24));
     render->add_option("--kernel", r.kernel, "Traversal kernel: auto (widest), bvh2, bvh4, bvh8")->capture_default_str();
@@ -129,6 +147,9 @@ int main(int argc, char** argv) {
     bench->add_option("--start", b.start, "Optimisers among the builders: builder of their start tree");
     bench->add_option("--toplevel", b.toplevels, "Top levels: flat, two-level (object BVHs under a BVH over instances), rebraid (Benthin 2017)")
         ->delimiter(',')->check(CLI::IsMember({"flat", "two-level", "rebraid"}))->capture_default_str();
+    bench->add_option("--blas-builder", b.blas_builders,
+                      "Two-level top levels: builders of the object BVHs, a row each (default: the --builder list)")
+        ->delimiter(',');
     bench->add_option("--frames-planned", b.frames_planned, "Frames that --builder auto plans time to image for (a row each)")
         ->delimiter(',')->check(CLI::Range(1, 1 << 24))->capture_default_str();
     bench->add_option("--kernel", b.kernels, "Kernels: auto (widest), bvh2, bvh4, bvh8")->delimiter(',')->capture_default_str();
@@ -220,6 +241,7 @@ int main(int argc, char** argv) {
             b.width = bench_size[0], b.height = bench_size[1];
             if (!accels.empty()) b.embree_qualities = qualities;
             if (dynamic_option->count()) b.dynamic = dynamic;
+            for (const std::string& blas : b.blas_builders) check_blas_builder(blas, b.toplevels);
             run_bench(b);
         }
     } catch (const std::exception& e) {
