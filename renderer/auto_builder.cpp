@@ -3,6 +3,7 @@
 #include "accel/builder.h"
 #include "accel/parallel.h"
 
+#include <algorithm>
 #include <cstdio>
 #include <limits>
 
@@ -17,7 +18,9 @@ SceneStatistics scene_statistics(const Scene& scene, const FlatScene& flat) {
         for (const Object& object : scene.meshes[instance.mesh].objects) s.placements += object.triangle_count > 0;
     using Sums = std::pair<double, double>;  // box half areas, twice the triangle areas
     Sums sums{0.0, 0.0};
+    BBox bounds;  // of the meshes, each in its own space: the world for a scene of identity placements
     for (const Mesh& mesh : scene.meshes) {
+        for (const Vec3& p : mesh.positions) bounds.extend(p);
         s.unique_triangles += mesh.triangles.size();
         const Sums mesh_sums = parallel::reduce(
             mesh.triangles.size(), 16 * 1024, Sums{0.0, 0.0},
@@ -35,6 +38,8 @@ SceneStatistics scene_statistics(const Scene& scene, const FlatScene& flat) {
         sums = {sums.first + mesh_sums.first, sums.second + mesh_sums.second};
     }
     s.box_excess = sums.second > 0.0 ? sums.first / sums.second : 1.0;
+    const double area = bounds.empty() ? 0.0 : double(bounds.half_area());
+    s.reducible_cover = area > 0.0 ? std::max(0.0, sums.first - sums.second) / area : 0.0;
     return s;
 }
 
@@ -60,27 +65,37 @@ bool slivers(const SceneStatistics& s) { return s.box_excess > kSliverExcess; }
 // gen:box 1.12, cornell-box 1.10) has large axis-aligned walls next to small detail.
 constexpr double kScanExcess = 1.75;
 bool architecture(const SceneStatistics& s) { return s.box_excess < kScanExcess; }
+// Architecture whose triangle boxes a ray pierces far more often than their triangles: crytek-sponza 6.8 (big
+// overlapping wall and arch triangles); sibenik 3.6, conference 3.7, gen:box 0.6, cornell-box 0.4, scans 1.7 to
+// 2.9. Splitting pays there even without slivers. The threshold lies between the shared scenes that split well and
+// those that do not; crytek-sponza is the only non-sliver scene measured above it.
+constexpr double kSplitCover = 5.0;
+bool dense_boxes(const SceneStatistics& s) { return architecture(s) && s.reducible_cover > kSplitCover; }
 
 double same_as_binned(const SceneStatistics&) { return 1.0; }
-// Against binned: crytek-sponza 0.82, sibenik 0.94, conference 1.11, gen:box 1.12; scans 1.00 to 1.05;
-// cylinders 0.39.
-double bonsai_split_frame(const SceneStatistics& s) { return slivers(s) ? 0.39 : architecture(s) ? 1.0 : 1.03; }
-// The same tree as binned without slivers (no triangle is split); cylinders 0.35.
-double esc_frame(const SceneStatistics& s) { return slivers(s) ? 0.35 : 1.0; }
-// crytek-sponza 0.76, sibenik 0.91, conference 0.90, gen:box 0.91; scans 1.02 to 1.06; not measured on
+// Against binned (bvh8): crytek-sponza 0.84, sibenik 1.00, conference 1.09, gen:box 1.12; scans 1.00 to 1.05;
+// cylinders 0.38.
+double bonsai_split_frame(const SceneStatistics& s) {
+    return slivers(s) ? 0.38 : dense_boxes(s) ? 0.84 : architecture(s) ? 1.0 : 1.03;
+}
+// The same tree as binned without slivers (no triangle is split); cylinders 0.37.
+double esc_frame(const SceneStatistics& s) { return slivers(s) ? 0.37 : 1.0; }
+// crytek-sponza 0.73, sibenik 0.96, conference 0.91, gen:box 0.91; scans 1.02 to 1.06; not measured on
 // slivers, where it cannot split.
-double bittner_frame(const SceneStatistics& s) { return architecture(s) ? 0.88 : 1.04; }
+double bittner_frame(const SceneStatistics& s) { return dense_boxes(s) ? 0.75 : architecture(s) ? 0.9 : 1.04; }
 
-double two_level_frame(const SceneStatistics&) { return 1.06; }
+// zoo-64, traversal against flat's: two-level 1.07, rebraid 1.035 (rebraid's tighter instance boxes).
+double two_level_frame(const SceneStatistics&) { return 1.07; }
+double rebraid_frame(const SceneStatistics&) { return 1.035; }
 
 constexpr Candidate kCandidates[] = {
     {"binned", "flat", 190.0, 240.0, &same_as_binned},
-    {"bonsai-split", "flat", 280.0, 1080.0, &bonsai_split_frame},
-    {"esc", "flat", 190.0, 1400.0, &esc_frame},
+    {"bonsai-split", "flat", 280.0, 1130.0, &bonsai_split_frame},
+    {"esc", "flat", 190.0, 1040.0, &esc_frame},
     {"bittner", "flat", 4000.0, 4000.0, &bittner_frame},
-    // Instanced objects: each unique triangle is built once (zoo-64: 25 ms against flat binned's 790 ms);
-    // traversal 1.06 times flat's on zoo-64.
+    // Instanced objects: each unique triangle is built once (zoo-64: 25 ms against flat binned's 820 ms).
     {"binned", "two-level", 600.0, 600.0, &two_level_frame},
+    {"binned", "rebraid", 600.0, 600.0, &rebraid_frame},
 };
 // Protocol paths of 9 rays at about 250 ns per ray per pixel on the project machine (BENCHMARK.md scenes);
 // rays through a sliver field cost 3.3 times as much (gen:cylinders: 7.5 us per pixel with binned).
@@ -95,7 +110,7 @@ AutoChoice choose_builder(const SceneStatistics& stats, int frames, uint64_t pix
     AutoChoice best;
     double best_ms = std::numeric_limits<double>::infinity(), frame_ms = 0.0, build_ms = 0.0;
     for (const Candidate& c : kCandidates) {
-        const bool two_level = std::string(c.toplevel) == "two-level";
+        const bool two_level = std::string(c.toplevel) != "flat";
         if (two_level && !instanced) continue;  // two-level only with instances
         // Flattening copies every instance: past this many triangles (about 2 GB of flat layout) two-level only.
         if (!two_level && instanced && stats.triangles > kMaxFlattenedTriangles) continue;
@@ -108,10 +123,10 @@ AutoChoice choose_builder(const SceneStatistics& stats, int frames, uint64_t pix
     }
     char reason[320];
     std::snprintf(reason, sizeof reason,
-                  "%llu triangles (%llu unique) in %llu placed objects, box excess %.2f, %d frames planned: predicted build "
-                  "%.1f ms + %d x %.1f ms",
+                  "%llu triangles (%llu unique) in %llu placed objects, box excess %.2f, reducible cover %.1f, %d frames "
+                  "planned: predicted build %.1f ms + %d x %.1f ms",
                   (unsigned long long)stats.triangles, (unsigned long long)stats.unique_triangles,
-                  (unsigned long long)stats.placements, stats.box_excess,
+                  (unsigned long long)stats.placements, stats.box_excess, stats.reducible_cover,
                   frames, build_ms, frames, frame_ms);
     best.reason = reason;
     return best;

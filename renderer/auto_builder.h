@@ -16,13 +16,17 @@ struct SceneStatistics {
     // Sum of triangle-box half areas over the sum of twice the triangle areas: 1 for axis-aligned right triangles,
     // large for long diagonal slivers, whose boxes spatial splits shrink (the split papers' motivation).
     double box_excess = 1.0;
+    // (Sum of triangle-box half areas - sum of twice the triangle areas) over the half area of the meshes' bounds:
+    // by Crofton's formula, how many more triangle boxes than triangles a random ray through the scene pierces, an
+    // upper bound on the tests per ray that splitting triangles can save.
+    double reducible_cover = 0.0;
 };
 
 SceneStatistics scene_statistics(const Scene& scene, const FlatScene& flat);
 
 struct AutoChoice {
     std::string builder;            // a registered builder
-    std::string toplevel = "flat";  // flat or two-level
+    std::string toplevel = "flat";  // flat, two-level or rebraid
     std::string reason;             // one line: the statistics and predicted times that decided
 };
 
