@@ -40,6 +40,8 @@ SceneStatistics scene_statistics(const Scene& scene, const FlatScene& flat) {
     s.box_excess = sums.second > 0.0 ? sums.first / sums.second : 1.0;
     const double area = bounds.empty() ? 0.0 : double(bounds.half_area());
     s.reducible_cover = area > 0.0 ? std::max(0.0, sums.first - sums.second) / area : 0.0;
+    const Vec3 eye = scene_camera(scene, flat).eye;
+    s.camera_inside = glm::all(glm::greaterThan(eye, flat.bounds.lower)) && glm::all(glm::lessThan(eye, flat.bounds.upper));
     return s;
 }
 
@@ -80,9 +82,12 @@ double bonsai_split_frame(const SceneStatistics& s) {
 }
 // The same tree as binned without slivers (no triangle is split); cylinders 0.37.
 double esc_frame(const SceneStatistics& s) { return slivers(s) ? 0.37 : 1.0; }
-// crytek-sponza 0.73, sibenik 0.96, conference 0.91, gen:box 0.91; scans 1.02 to 1.06; not measured on
+// crytek-sponza 0.75, sibenik 0.96, conference 0.92, gen:box 0.91; scans 1.01 to 1.04; not measured on
 // slivers, where it cannot split.
 double bittner_frame(const SceneStatistics& s) { return dense_boxes(s) ? 0.75 : architecture(s) ? 0.9 : 1.04; }
+// One-triangle leaves, merged into blocks in the wide layout: architecture 1.18 to 1.38, scans 1.10 to 1.21,
+// cylinders 1.86. The cheapest build, so it wins where a frame is cheap against building.
+double lbvh_frame(const SceneStatistics& s) { return slivers(s) ? 1.86 : architecture(s) ? 1.25 : 1.15; }
 
 // zoo-64, traversal against flat's: two-level 1.07, rebraid 1.035 (rebraid's tighter instance boxes).
 double two_level_frame(const SceneStatistics&) { return 1.07; }
@@ -93,14 +98,18 @@ constexpr Candidate kCandidates[] = {
     {"bonsai-split", "flat", 280.0, 1130.0, &bonsai_split_frame},
     {"esc", "flat", 190.0, 1040.0, &esc_frame},
     {"bittner", "flat", 4000.0, 4000.0, &bittner_frame},
+    {"lbvh", "flat", 90.0, 100.0, &lbvh_frame},
     // Instanced objects: each unique triangle is built once (zoo-64: 25 ms against flat binned's 820 ms).
     {"binned", "two-level", 600.0, 600.0, &two_level_frame},
     {"binned", "rebraid", 600.0, 600.0, &rebraid_frame},
 };
-// Protocol paths of 9 rays at about 250 ns per ray per pixel on the project machine (BENCHMARK.md scenes);
-// rays through a sliver field cost 3.3 times as much (gen:cylinders: 7.5 us per pixel with binned).
-constexpr double kFrameNsPerPixel = 9 * 250.0;
-constexpr double kSliverRayCost = 3.3;
+// Frame time per pixel with binned, 2 threads, bvh8: rooms seen from inside 1.4 to 2.6 us (crytek-sponza, sibenik,
+// conference), objects seen from outside 0.07 to 0.6 us (geometric mean 0.2: the scans, cornell-box, gen:box,
+// gen:surface, zoo-64), the sliver field 6.3 us.
+constexpr double kInsideNsPerPixel = 2000.0, kOutsideNsPerPixel = 200.0, kSliverNsPerPixel = 6300.0;
+double frame_ns_per_pixel(const SceneStatistics& s) {
+    return slivers(s) ? kSliverNsPerPixel : s.camera_inside ? kInsideNsPerPixel : kOutsideNsPerPixel;
+}
 constexpr uint64_t kMaxFlattenedTriangles = 16'000'000;
 
 }  // namespace
@@ -116,17 +125,17 @@ AutoChoice choose_builder(const SceneStatistics& stats, int frames, uint64_t pix
         if (!two_level && instanced && stats.triangles > kMaxFlattenedTriangles) continue;
         const double built = double(two_level ? stats.unique_triangles : stats.triangles);
         const double build = built * (slivers(stats) ? c.sliver_build_ns_per_triangle : c.build_ns_per_triangle) * 1e-6;
-        const double frame = double(pixels) * kFrameNsPerPixel * (slivers(stats) ? kSliverRayCost : 1.0) * 1e-6 *
-                             c.relative_frame(stats);
+        const double frame = double(pixels) * frame_ns_per_pixel(stats) * 1e-6 * c.relative_frame(stats);
         const double total = build + double(frames) * frame;
         if (total < best_ms) best_ms = total, best = {c.builder, c.toplevel, ""}, frame_ms = frame, build_ms = build;
     }
     char reason[320];
     std::snprintf(reason, sizeof reason,
-                  "%llu triangles (%llu unique) in %llu placed objects, box excess %.2f, reducible cover %.1f, %d frames "
-                  "planned: predicted build %.1f ms + %d x %.1f ms",
+                  "%llu triangles (%llu unique) in %llu placed objects, box excess %.2f, reducible cover %.1f, camera %s, "
+                  "%d frames planned: predicted build %.1f ms + %d x %.1f ms",
                   (unsigned long long)stats.triangles, (unsigned long long)stats.unique_triangles,
                   (unsigned long long)stats.placements, stats.box_excess, stats.reducible_cover,
+                  stats.camera_inside ? "inside" : "outside",
                   frames, build_ms, frames, frame_ms);
     best.reason = reason;
     return best;

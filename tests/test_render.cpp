@@ -268,12 +268,17 @@ TEST_CASE("auto chooses two-level only with instances and plans for the frames a
     // Splits for one frame only where triangle boxes are pierced far more often than triangles (crytek-sponza's
     // statistics), not on architecture whose boxes are not (conference's).
     SceneStatistics sponza = flat_scene, conference = flat_scene;
-    sponza.box_excess = 1.48, sponza.reducible_cover = 6.8;
-    conference.box_excess = 1.59, conference.reducible_cover = 3.7;
+    sponza.box_excess = 1.48, sponza.reducible_cover = 6.8, sponza.camera_inside = true;
+    conference.box_excess = 1.59, conference.reducible_cover = 3.7, conference.camera_inside = true;
     CHECK(choose_builder(sponza, 1, 1024 * 768).builder == "bonsai-split");
     CHECK(choose_builder(conference, 1, 1024 * 768).builder == "binned");
     CHECK(choose_builder(sponza, 256, 1024 * 768).builder == "bittner");
     CHECK(choose_builder(sponza, 1, 1024 * 768).reason.find("reducible cover 6.8") != std::string::npos);
+    // An object seen from outside, cheap to trace, a million triangles, one frame: the fastest build wins.
+    SceneStatistics surface;
+    surface.triangles = surface.unique_triangles = 1000000, surface.box_excess = 2.05, surface.reducible_cover = 2.5;
+    CHECK(choose_builder(surface, 1, 1024 * 768).builder == "lbvh");
+    CHECK(choose_builder(surface, 256, 1024 * 768).builder == "binned");
     SceneStatistics zoo = flat_scene;
     zoo.triangles = 64 * zoo.unique_triangles;
     CHECK(choose_builder(zoo, 16, 1024 * 768).toplevel != "flat");
