@@ -20,6 +20,9 @@ struct Extent {
 // Where a wide subtree's next node slot, leaf entry and leaf go.
 using Cursor = Extent;
 
+// Marks the lanes past a merged subtree's last ref (Collapser::subtree_refs).
+constexpr uint32_t kNoRef = 0xffffffffu;
+
 // A wide node's children as binary nodes (Ganestam and Doggett 2016, sec. 4.2): the binary node's two children,
 // then repeatedly the inner child of largest surface area (the first of equals) replaced by its two children
 // until there are N.
@@ -276,10 +279,10 @@ private:
             if (shared_lanes < kLanes) sink_.pad(shared_block, shared_lanes);
     }
 
-    // The refs of a merged subtree's one-triangle leaves, in depth-first order; kNone past the last.
+    // The refs of a merged subtree's one-triangle leaves, in depth-first order; kNoRef past the last.
     std::array<uint32_t, kLanes> subtree_refs(uint32_t index) const {
         std::array<uint32_t, kLanes> refs;
-        refs.fill(kNone);
+        refs.fill(kNoRef);
         std::array<uint32_t, 2 * kLanes> stack;
         uint32_t n = 0;
         int sp = 0;
@@ -295,7 +298,6 @@ private:
         }
         return refs;
     }
-    static constexpr uint32_t kNone = 0xffffffffu;
 
     static bool shares_block(const BvhNode& c) { return LeafSink::kSharesBlocks && c.count == 1; }
 
@@ -367,10 +369,10 @@ struct TriangleLeaves {
             if (run.count % kLanes) pad(run.first_entry + run.count / kLanes, run.count % kLanes);
     }
 
-    // A merged subtree's triangles (refs up to the first kNone) in one block; returns how many.
+    // A merged subtree's triangles (refs up to the first kNoRef) in one block; returns how many.
     uint32_t gathered(uint32_t entry, const std::array<uint32_t, kLanes>& refs) {
         uint32_t lane = 0;
-        for (; lane < kLanes && refs[lane] != 0xffffffffu; ++lane) {
+        for (; lane < kLanes && refs[lane] != kNoRef; ++lane) {
             const uint32_t prim = bvh.refs[refs[lane]];
             put_triangle(out.leaves[entry], lane, prim, triangles[prim]);
         }
