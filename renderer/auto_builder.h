@@ -29,7 +29,7 @@ SceneStatistics scene_statistics(const Scene& scene, const FlatScene& flat);
 
 struct AutoChoice {
     std::string builder;            // a registered builder
-    std::string toplevel = "flat";  // flat, two-level or rebraid
+    std::string toplevel = "flat";  // flat, or rebraid for instanced scenes
     std::string reason;             // one line: the statistics and predicted times that decided
 };
 
