@@ -1,6 +1,7 @@
 #include "accel/wide_bvh.h"
 #include "accel/parallel.h"
 
+#include <algorithm>
 #include <array>
 #include <bit>
 
@@ -20,7 +21,7 @@ struct Extent {
 // Where a wide subtree's next node slot, leaf entry and leaf go.
 using Cursor = Extent;
 
-// Marks the lanes past a merged subtree's last ref (Collapser::subtree_refs).
+// Marks the lanes past a merged subtree's last ref (Collapser::merges).
 constexpr uint32_t kNoRef = 0xffffffffu;
 
 // A wide node's children as binary nodes (Ganestam and Doggett 2016, sec. 4.2): the binary node's two children,
@@ -70,26 +71,39 @@ struct WideChildren {
 // With shared blocks, an inner child whose binary subtree is at most a block's lanes of one-triangle leaves is
 // written as one leaf of those triangles, in the subtree's depth-first order: its wide node would hold only
 // those leaves, and a ray that reaches it pays a node test for the box tests the block test makes anyway. On
-// crytek-sponza's LBVH (one triangle per leaf) that is 81% of the BVH8 nodes.
+// crytek-sponza's LBVH (one triangle per leaf) that is 81% of the BVH8 nodes. The first pass finds such a
+// subtree by a walk that gives up past a block's lanes, and keeps its refs for the second, which reads them in
+// order and fetches their triangles ahead.
 template <int N, class LeafSink>
 class Collapser {
+    static constexpr uint32_t kLanes = uint32_t(block_lanes(N));
+    // A merged subtree's refs in depth-first order, kNoRef past the last; all kNoRef for a child not merged.
+    using Refs = std::array<uint32_t, kLanes>;
+
+    // A subtree below the top levels: its wide nodes in depth-first order, and the refs of their merged children
+    // in the same order (node by node, child by child).
+    struct Recorded {
+        std::vector<WideChildren<N>> nodes;
+        std::vector<Refs> merged;
+    };
+
 public:
     Collapser(const Bvh& bvh, WideNodes<N>& nodes, uint32_t (*entries)(int, uint32_t), LeafSink& sink)
         : bvh_(bvh), nodes_(nodes), entries_(entries), sink_(sink),
           top_depth_(bvh.nodes.size() < kParallelNodes ? 0 : kTopDepth),
-          top_extents_(slot_of(top_depth_ + 1, 0)), top_merged_(top_extents_.size()), subtrees_(slot_of(top_depth_ + 1, 0) - slot_of(top_depth_, 0)) {}
+          top_extents_(slot_of(top_depth_ + 1, 0)), top_merged_(top_extents_.size()),
+          subtrees_(slot_of(top_depth_ + 1, 0) - slot_of(top_depth_, 0)) {}
 
     // Returns the extent of the whole tree; the sink is told it (`reserve`) before any leaf arrives.
     Extent run() {
         const bool lone_leaf = bvh_.nodes[0].is_leaf();
-        uint32_t root_merged = 0;  // the root is a node whatever its subtree
-        const Extent total = lone_leaf ? own_extent(WideChildren<N>(0)) : measure(0, 0, 0, root_merged);
+        const Extent total = lone_leaf ? own_extent(WideChildren<N>(0)) : measure(0, 0, 0);
         nodes_.clear();
         nodes_.resize(total.nodes);
         sink_.reserve(total);
         Cursor at{1, 0, 0};
         if (lone_leaf)
-            write_node(WideChildren<N>(0), 0, at);
+            write_node(WideChildren<N>(0), 0, at, nullptr);
         else
             fill(0, 0, 0, 0, at);
         return total;
@@ -100,8 +114,8 @@ private:
     static constexpr size_t kParallelNodes = 16 * 1024;
     // Wide levels above the subtrees that are measured and written concurrently: 2^8 or 2^9 subtrees at any width.
     static constexpr uint32_t kTopDepth = 9 / std::bit_width(unsigned(N - 1));
-    static constexpr uint32_t kLanes = uint32_t(block_lanes(N));
-    static constexpr bool kMerges = LeafSink::kSharesBlocks;
+    // Merged leaves ahead of the one being written whose triangles are fetched.
+    static constexpr size_t kPrefetchMerged = 4;
 
     // Index of the top-level node at `depth` reached by child choices `path` (base N digits), in level order.
     static uint32_t slot_of(uint32_t depth, uint32_t path) {
@@ -110,70 +124,71 @@ private:
         return first + path;
     }
 
-    // The extent of the wide subtree rooted at inner binary node `index`, reached from the root by `path`;
-    // `merged` is set to its triangles when its parent writes it as one leaf, else 0.
-    Extent measure(uint32_t index, uint32_t depth, uint32_t path, uint32_t& merged) {
-        if (depth == top_depth_) return record(index, subtrees_[path], merged);
+    // The extent of the wide subtree rooted at inner binary node `index` (not merged), reached from the root by
+    // `path`.
+    Extent measure(uint32_t index, uint32_t depth, uint32_t path) {
+        if (depth == top_depth_) return record(index, subtrees_[path]);
         WideChildren<N> children(bvh_, index);
+        for (int i = 0; i < children.count; ++i) {
+            Refs& refs = top_merged_[slot_of(depth + 1, path * N + uint32_t(i))];
+            if (merges(children.node[i], refs)) children.merged |= 1u << i;
+        }
         parallel::for_each(size_t(children.count), 1, [&](size_t i) {
-            const uint32_t child = children.node[i], slot = slot_of(depth + 1, path * N + uint32_t(i));
-            if (!bvh_.nodes[child].is_leaf()) top_extents_[slot] = measure(child, depth + 1, path * N + uint32_t(i), top_merged_[slot]);
+            const uint32_t slot = slot_of(depth + 1, path * N + uint32_t(i));
+            if (is_node(children, int(i))) top_extents_[slot] = measure(children.node[i], depth + 1, path * N + uint32_t(i));
         });
-        const std::array<uint32_t, N> triangles = merged_children(children, depth, path);
         Extent total = own_extent(children);
         for (int i = 0; i < children.count; ++i)
-            if (!bvh_.nodes[children.node[i]].is_leaf() && !triangles[i]) total += top_extents_[slot_of(depth + 1, path * N + uint32_t(i))];
-        merged = mergeable_triangles(children, triangles);
+            if (is_node(children, i)) total += top_extents_[slot_of(depth + 1, path * N + uint32_t(i))];
         return total;
     }
 
-    // Marks the top-level children that measure() found mergeable; returns their triangles (0 for the others).
-    std::array<uint32_t, N> merged_children(WideChildren<N>& children, uint32_t depth, uint32_t path) const {
-        std::array<uint32_t, N> triangles{};
+    // Measures a subtree below the top levels (its root not merged), appending its wide nodes in depth-first order.
+    Extent record(uint32_t index, Recorded& out) {
+        WideChildren<N> children(bvh_, index);
         for (int i = 0; i < children.count; ++i) {
-            if (bvh_.nodes[children.node[i]].is_leaf()) continue;
-            triangles[i] = top_merged_[slot_of(depth + 1, path * N + uint32_t(i))];
-            if (triangles[i]) children.merged |= 1u << i;
-        }
-        return triangles;
-    }
-
-    // Measures a subtree below the top levels, appending its wide nodes' children in depth-first order.
-    Extent record(uint32_t index, std::vector<WideChildren<N>>& out, uint32_t& merged) {
-        const size_t self = out.size();
-        out.emplace_back(bvh_, index);
-        const WideChildren<N> children = out.back();
-        std::array<uint32_t, N> triangles{};
-        Extent total{0, 0, 0};
-        for (int i = 0; i < children.count; ++i) {
-            if (bvh_.nodes[children.node[i]].is_leaf()) continue;
-            const Extent child = record(children.node[i], out, triangles[i]);
-            if (triangles[i]) {
-                out.pop_back();  // a node of leaves only: its record is the last one
-                out[self].merged |= 1u << i;
-            } else {
-                total += child;
+            Refs refs;
+            if (merges(children.node[i], refs)) {
+                children.merged |= 1u << i;
+                out.merged.push_back(refs);
             }
         }
-        total += own_extent(out[self]);
-        merged = mergeable_triangles(out[self], triangles);
+        out.nodes.push_back(children);
+        Extent total = own_extent(children);
+        for (int i = 0; i < children.count; ++i)
+            if (is_node(children, i)) total += record(children.node[i], out);
         return total;
     }
 
-    // The triangles of a wide node whose children are all one-triangle leaves or merged leaves, at most a
-    // block's lanes of them: its parent writes it as one leaf. 0 for any other node.
-    uint32_t mergeable_triangles(const WideChildren<N>& children, const std::array<uint32_t, N>& merged) const {
-        if constexpr (!kMerges) return 0;
-        uint32_t triangles = 0;
-        for (int i = 0; i < children.count; ++i) {
-            if (children.merged >> i & 1)
-                triangles += merged[i];
-            else if (bvh_.nodes[children.node[i]].count == 1)
-                ++triangles;
-            else
-                return 0;
+    // Whether binary node `index` is an inner node whose subtree is at most a block's lanes of one-triangle leaves;
+    // if so, `refs` receives them in depth-first order, else it is all kNoRef. The walk stops at the first leaf past
+    // that (its stack never grows past the lanes' count plus one on a subtree that merges).
+    bool merges(uint32_t index, Refs& refs) const {
+        refs.fill(kNoRef);
+        if (!kMerges || bvh_.nodes[index].is_leaf()) return false;
+        Refs found = refs;
+        std::array<uint32_t, kLanes + 2> stack;
+        uint32_t n = 0;
+        size_t sp = 0;
+        stack[sp++] = index;
+        while (sp) {
+            const BvhNode& node = bvh_.nodes[stack[--sp]];
+            if (node.is_leaf()) {
+                if (node.count != 1 || n == kLanes) return false;
+                found[n++] = node.index;
+            } else {
+                if (sp + 2 > stack.size()) return false;
+                stack[sp++] = node.index + 1;
+                stack[sp++] = node.index;
+            }
         }
-        return triangles <= kLanes ? triangles : 0;
+        refs = found;
+        return true;
+    }
+
+    // Whether child i of a wide node is written as a wide node of its own.
+    bool is_node(const WideChildren<N>& children, int i) const {
+        return !(children.merged >> i & 1) && !bvh_.nodes[children.node[i]].is_leaf();
     }
 
     // What a wide node takes itself: its slot, its leaves and their entries.
@@ -202,24 +217,34 @@ private:
     void fill(uint32_t index, uint32_t self, uint32_t depth, uint32_t path, Cursor at) {
         if (depth == top_depth_) return replay(subtrees_[path], self, at);
         WideChildren<N> children(bvh_, index);
-        merged_children(children, depth, path);
-        write_node(children, self, at);
+        std::array<Refs, N> merged;
+        int merged_count = 0;
+        for (int i = 0; i < children.count; ++i) {
+            const Refs& refs = top_merged_[slot_of(depth + 1, path * N + uint32_t(i))];
+            if (refs[0] == kNoRef) continue;
+            children.merged |= 1u << i;
+            merged[merged_count++] = refs;
+        }
+        write_node(children, self, at, merged.data());
         std::array<Cursor, N> start;
         for (int i = 0; i < children.count; ++i) {
-            if (nodes_[self].is_leaf(i)) continue;
+            if (!is_node(children, i)) continue;
             start[i] = at;
             const Extent& e = top_extents_[slot_of(depth + 1, path * N + uint32_t(i))];
             at += Extent{e.nodes - 1, e.entries, e.leaves};  // its root took a slot in write_node
         }
         parallel::for_each(size_t(children.count), 1, [&](size_t i) {
-            if (!nodes_[self].is_leaf(int(i)))
+            if (is_node(children, int(i)))
                 fill(children.node[i], nodes_[self].child[i], depth + 1, path * N + uint32_t(i), start[i]);
         });
     }
 
     // Writes a recorded subtree from slot `self` in depth-first order: each node takes the slot its parent gave it,
     // kept on a stack so that the first child's subtree comes next.
-    void replay(const std::vector<WideChildren<N>>& records, uint32_t self, Cursor at) {
+    void replay(const Recorded& recorded, uint32_t self, Cursor at) {
+        const std::vector<WideChildren<N>>& records = recorded.nodes;
+        const Refs* merged = recorded.merged.data();
+        const Refs* const merged_end = merged + recorded.merged.size();
         std::vector<uint32_t> slots{self};
         for (size_t r = 0; r < records.size(); ++r) {
             // Fetch ahead what write_node reads at random: binary children two records on, and the leaf
@@ -232,17 +257,22 @@ private:
                     if (c.is_leaf()) sink_.prefetch(c.index);
                 }
             const WideChildren<N>& children = records[r];
+            const int merged_here = std::popcount(children.merged);
+            for (const Refs* ahead = merged + kPrefetchMerged; ahead < std::min(merged + kPrefetchMerged + merged_here, merged_end); ++ahead)
+                for (uint32_t lane = 0; lane < kLanes && (*ahead)[lane] != kNoRef; ++lane) sink_.prefetch((*ahead)[lane]);
             const uint32_t slot = slots.back();
             slots.pop_back();
-            write_node(children, slot, at);
+            write_node(children, slot, at, merged);
+            merged += merged_here;
             for (int i = children.count - 1; i >= 0; --i)
-                if (!nodes_[slot].is_leaf(i)) slots.push_back(nodes_[slot].child[i]);
+                if (is_node(children, i)) slots.push_back(nodes_[slot].child[i]);
         }
     }
 
     // Writes node `self`: inner children take the next node slots, leaf children the next entries, the
-    // one-triangle leaves among them sharing blocks where the sink shares them.
-    void write_node(const WideChildren<N>& children, uint32_t self, Cursor& at) {
+    // one-triangle leaves among them sharing blocks where the sink shares them; merged children take the refs
+    // from `merged` in child order.
+    void write_node(const WideChildren<N>& children, uint32_t self, Cursor& at, const Refs* merged) {
         WideNode<N>& node = nodes_[self];
         uint32_t shared_block = 0, shared_lanes = kLanes;  // the block one-triangle leaves are filling
         for (int i = 0; i < N; ++i) {
@@ -258,7 +288,7 @@ private:
             if (children.merged >> i & 1) {
                 if constexpr (kMerges) {
                     node.child[i] = at.entries++;
-                    node.count[i] = sink_.gathered(node.child[i], subtree_refs(children.node[i]));
+                    node.count[i] = sink_.gathered(node.child[i], *merged++);
                     ++at.leaves;
                 }
             } else if (!c.is_leaf()) {
@@ -279,25 +309,7 @@ private:
             if (shared_lanes < kLanes) sink_.pad(shared_block, shared_lanes);
     }
 
-    // The refs of a merged subtree's one-triangle leaves, in depth-first order; kNoRef past the last.
-    std::array<uint32_t, kLanes> subtree_refs(uint32_t index) const {
-        std::array<uint32_t, kLanes> refs;
-        refs.fill(kNoRef);
-        std::array<uint32_t, 2 * kLanes> stack;
-        uint32_t n = 0;
-        int sp = 0;
-        stack[sp++] = index;
-        while (sp) {
-            const BvhNode& node = bvh_.nodes[stack[--sp]];
-            if (node.is_leaf()) {
-                refs[n++] = node.index;
-            } else {
-                stack[sp++] = node.index + 1;
-                stack[sp++] = node.index;
-            }
-        }
-        return refs;
-    }
+    static constexpr bool kMerges = LeafSink::kSharesBlocks;
 
     static bool shares_block(const BvhNode& c) { return LeafSink::kSharesBlocks && c.count == 1; }
 
@@ -313,9 +325,9 @@ private:
     uint32_t (*entries_)(int, uint32_t);
     LeafSink& sink_;
     const uint32_t top_depth_;
-    std::vector<Extent> top_extents_;                      // by top-level slot (slot_of)
-    std::vector<uint32_t> top_merged_;                     // by top-level slot: measure()'s `merged`
-    std::vector<std::vector<WideChildren<N>>> subtrees_;  // by path at top_depth_: recorded wide nodes
+    std::vector<Extent> top_extents_;  // by top-level slot (slot_of)
+    std::vector<Refs> top_merged_;     // by top-level slot: the refs of a merged child, else all kNoRef
+    std::vector<Recorded> subtrees_;   // by path at top_depth_
 };
 
 // Keeps the leaves in emission order, one run each, for a caller whose leaves hold something else than triangles.
