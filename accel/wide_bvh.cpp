@@ -146,6 +146,7 @@ private:
     // Measures a subtree below the top levels (its root not merged), appending its wide nodes in depth-first order.
     Extent record(uint32_t index, Recorded& out) {
         WideChildren<N> children(bvh_, index);
+        prefetch_grandchildren(children);
         for (int i = 0; i < children.count; ++i) {
             Refs refs;
             if (merges(children.node[i], refs)) {
@@ -184,6 +185,19 @@ private:
         }
         refs = found;
         return true;
+    }
+
+    // The walks of merges() are chains of dependent loads, bound by latency: fetch the next level of every child's
+    // subtree at once (WideChildren fetched the children's own children).
+    void prefetch_grandchildren(const WideChildren<N>& children) const {
+        for (int i = 0; i < children.count; ++i) {
+            const BvhNode& c = bvh_.nodes[children.node[i]];
+            if (c.is_leaf()) continue;
+            for (uint32_t k = 0; k < 2; ++k) {
+                const BvhNode& g = bvh_.nodes[c.index + k];
+                if (!g.is_leaf()) __builtin_prefetch(&bvh_.nodes[g.index]);
+            }
+        }
     }
 
     // Whether child i of a wide node is written as a wide node of its own.

@@ -9,6 +9,7 @@
 
 #include <CLI/CLI.hpp>
 #include <tbb/global_control.h>
+#include <malloc.h>
 #include <unistd.h>
 
 #include <chrono>
@@ -105,9 +106,20 @@ void run_render(RenderOptions o) {
                 render_s, double(rays) / render_s / 1e6, image.mean(o.spp), o.output.c_str());
 }
 
+// Freed memory stays in the process for the next build instead of going back to the kernel: glibc otherwise maps
+// large arrays afresh for every build and unmaps them when freed, and on this project's VM the page faults of
+// touching them again cost more than the work (a 2-million-triangle collapse: 0.7 s of faults for 0.1 s of
+// writing). Builds after the first reuse the memory; the bench reports the fastest of several builds.
+void keep_freed_memory() {
+    constexpr int kLargest = 1 << 30;  // allocations up to 1 GiB come from the heap, which is never trimmed below it
+    mallopt(M_MMAP_THRESHOLD, kLargest);
+    mallopt(M_TRIM_THRESHOLD, kLargest);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
+    keep_freed_memory();
     CLI::App app{"canopy: a CPU ray tracer with pluggable BVH builders, measured against Embree"};
     app.require_subcommand(1);
     int threads = 0;
