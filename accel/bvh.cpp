@@ -5,8 +5,8 @@
 
 namespace canopy {
 
-std::vector<BvhNode> compact_sparse_nodes(const BvhNode* sparse) {
-    std::vector<BvhNode> dense;
+BvhNodes compact_sparse_nodes(const BvhNode* sparse) {
+    BvhNodes dense;
     dense.push_back(sparse[0]);
     struct Pending { uint32_t dense_index, sparse_children; };
     std::vector<Pending> stack;

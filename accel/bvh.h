@@ -4,6 +4,9 @@
 #include "accel/geometry.h"
 
 #include <cstdint>
+#include <memory>
+#include <type_traits>
+#include <utility>
 #include <vector>
 
 namespace canopy {
@@ -16,6 +19,29 @@ struct BvhNode {
     bool is_leaf() const { return count != 0; }
 };
 static_assert(sizeof(BvhNode) == 32);
+
+// Allocates node arrays without initialising them: builders write every node they resize to, so value-initialising
+// them first (empty boxes, zero counts) is a wasted pass over the array (on crytek-sponza's LBVH, 2.8 ms beside a
+// 6 ms sort). BvhNode is an aggregate, an implicit-lifetime type, so the allocated bytes are its objects as they are.
+template <class T>
+struct UninitializedAllocator : std::allocator<T> {
+    static_assert(std::is_trivially_destructible_v<T> && std::is_trivially_copyable_v<T>);
+    template <class U>
+    struct rebind {
+        using other = UninitializedAllocator<U>;
+    };
+    UninitializedAllocator() = default;
+    template <class U>
+    UninitializedAllocator(const UninitializedAllocator<U>&) {}
+    template <class U>
+    void construct(U*) noexcept {}  // default construction: the bytes stay as they are
+    template <class U, class... Args>
+    void construct(U* p, Args&&... args) {
+        ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
+    }
+};
+
+using BvhNodes = std::vector<BvhNode, UninitializedAllocator<BvhNode>>;
 
 // Every builder keeps its trees at most this deep (edges from the root), so traversal stacks have a
 // fixed size. Past kMedianFallbackDepth a builder cuts at the median, which adds at most 32 levels.
@@ -30,7 +56,7 @@ struct SplitReport {
 };
 
 struct Bvh {
-    std::vector<BvhNode> nodes;  // nodes[0] is the root
+    BvhNodes nodes;  // nodes[0] is the root; resize() leaves the new nodes unwritten
     std::vector<uint32_t> refs;  // triangle ids, leaf by leaf
     SplitReport split;
 };

@@ -5,6 +5,6 @@ namespace canopy {
 
 // Copies the tree rooted at sparse[0] into a dense array, depth first, siblings kept adjacent.
 // Parallel builders reserve node slots per subtree and leave gaps; this removes them.
-std::vector<BvhNode> compact_sparse_nodes(const BvhNode* sparse);
+BvhNodes compact_sparse_nodes(const BvhNode* sparse);
 
 }  // namespace canopy

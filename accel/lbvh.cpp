@@ -41,7 +41,7 @@ Bvh build_lbvh(BuildInput&& input, const BuildSettings&) {
     Bvh bvh;
     MortonOrder sorted;
     std::vector<std::atomic<uint32_t>> other_end;  // 0 until a child arrives, then its range end + 1
-    // The output arrays are initialised on one thread (a vector cannot be filled in parallel) while the codes sort.
+    // The output arrays are allocated (the refs and the climb counters zeroed, on one thread) while the codes sort.
     parallel::fork_join(n, kGrain, [&] { sorted = sort_by_morton_code(refs); }, [&] {
         bvh.refs.resize(n);
         bvh.nodes.resize(2 * size_t(n) - 1);

@@ -25,7 +25,7 @@ public:
         return {descendants + 2, descendants + 2 * left_size};
     }
 
-    std::vector<BvhNode> finish() const { return compact_sparse_nodes(nodes_.get()); }
+    BvhNodes finish() const { return compact_sparse_nodes(nodes_.get()); }
 
 private:
     struct Deleter {
