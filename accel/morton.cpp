@@ -42,14 +42,14 @@ std::vector<uint64_t> morton_codes(const std::vector<PrimRef>& refs) {
     return codes;
 }
 
+// A sort key: the code's top 32 bits above the reference's index. Radix passes move 8 bytes per reference instead
+// of a 12-byte (code, index) pair; a sort over these bits is bandwidth-bound.
+constexpr int kKeyCodeBits = 32;
+constexpr int kLowBits = 63 - kKeyCodeBits;  // code bits below the key's, told apart afterwards
 constexpr int kDigitBits = 11;
 constexpr uint32_t kDigits = 1u << kDigitBits;
-// Bits the radix passes sort by, from the top: three digits. Codes equal in them are rare and few (their
-// centroids share a cell of a 2048^3 grid), so sorting those runs afterwards beats three more passes.
-constexpr int kSortedBits = 3 * kDigitBits;
-constexpr int kLowBits = 63 - kSortedBits;
 
-// Orders a run of codes equal in their top kSortedBits by whole code; equal codes keep index order, as they came
+// Orders a run of codes equal in their top kKeyCodeBits by whole code; equal codes keep index order, as they came
 // in. Short runs by insertion, long ones (dense clusters of tiny triangles) by std::sort on (code, index).
 void sort_run(uint64_t* codes, uint32_t* order, size_t n) {
     if (n <= 32) {
@@ -68,51 +68,52 @@ void sort_run(uint64_t* codes, uint32_t* order, size_t n) {
     for (size_t i = 0; i < n; ++i) codes[i] = run[i].first, order[i] = run[i].second;
 }
 
-// Least-significant-digit radix sort of (code, index) pairs by the codes' top kSortedBits, 11 bits a pass, each
-// pass a parallel histogram, a prefix sum per chunk and a parallel stable scatter; then the runs still tied
-// sorted in place. Returns the indices in code order; stable, so equal codes keep index order and the result
-// does not depend on threads.
-std::vector<uint32_t> radix_sort(std::vector<uint64_t>& codes) {
+// Least-significant-digit radix sort of the keys by their code bits, 11 bits a pass, each pass a parallel
+// histogram, a prefix sum per chunk and a parallel stable scatter. The index in the key's low bits then gives the
+// order and the whole codes, and the runs still tied are sorted in place. Stable, so equal codes keep index order
+// and the result does not depend on threads.
+void radix_sort(std::vector<uint64_t>& codes, std::vector<uint32_t>& order) {
     const size_t n = codes.size();
     const size_t chunks = std::max<size_t>(1, std::min<size_t>(64, n / kGrain));
-    std::vector<uint32_t> order(n), next_order(n);
-    std::vector<uint64_t> next_codes(n);
-    for (uint32_t i = 0; i < n; ++i) order[i] = i;
     auto chunk_begin = [&](size_t c) { return n * c / chunks; };
-    for (int shift = kLowBits; shift < 63; shift += kDigitBits) {
-        auto digit = [shift](uint64_t code) { return uint32_t(code >> shift) & (kDigits - 1); };
-        std::vector<std::array<uint32_t, kDigits>> counts(chunks);
+    std::vector<uint64_t> keys(n), next(n);
+    parallel::for_each(n, kGrain, [&](size_t i) { keys[i] = codes[i] >> kLowBits << 32 | i; });
+    std::vector<std::array<uint32_t, kDigits>> counts(chunks);
+    for (int shift = 32; shift < 64; shift += kDigitBits) {
+        auto digit = [shift](uint64_t key) { return uint32_t(key >> shift) & (kDigits - 1); };
         parallel::for_each(chunks, 1, [&](size_t c) {
             counts[c].fill(0);
-            for (size_t i = chunk_begin(c); i < chunk_begin(c + 1); ++i) ++counts[c][digit(codes[i])];
+            for (size_t i = chunk_begin(c); i < chunk_begin(c + 1); ++i) ++counts[c][digit(keys[i])];
         });
         uint32_t offset = 0;
         for (uint32_t d = 0; d < kDigits; ++d)
             for (size_t c = 0; c < chunks; ++c) offset += std::exchange(counts[c][d], offset);
         parallel::for_each(chunks, 1, [&](size_t c) {
-            for (size_t i = chunk_begin(c); i < chunk_begin(c + 1); ++i) {
-                const uint32_t at = counts[c][digit(codes[i])]++;
-                next_codes[at] = codes[i];
-                next_order[at] = order[i];
-            }
+            for (size_t i = chunk_begin(c); i < chunk_begin(c + 1); ++i) next[counts[c][digit(keys[i])]++] = keys[i];
         });
-        codes.swap(next_codes);
-        order.swap(next_order);
+        keys.swap(next);
     }
-    // Runs tied in the sorted bits, each handled by the chunk it starts in.
+    // The sorted codes and indices, and the runs tied in the key's code bits, each run handled by the chunk it
+    // starts in.
+    order.resize(n);
+    std::vector<uint64_t>& sorted = next;
+    parallel::for_each(n, kGrain, [&](size_t i) {
+        order[i] = uint32_t(keys[i]);
+        sorted[i] = codes[order[i]];
+    });
     parallel::for_each(chunks, 1, [&](size_t c) {
         for (size_t i = chunk_begin(c); i < chunk_begin(c + 1);) {
             size_t end = i + 1;
-            while (end < n && codes[end] >> kLowBits == codes[i] >> kLowBits) ++end;
-            if (i > 0 && codes[i - 1] >> kLowBits == codes[i] >> kLowBits) {  // started in an earlier chunk
+            while (end < n && keys[end] >> 32 == keys[i] >> 32) ++end;
+            if (i > 0 && keys[i - 1] >> 32 == keys[i] >> 32) {  // started in an earlier chunk
                 i = end;
                 continue;
             }
-            if (end - i > 1) sort_run(&codes[i], &order[i], end - i);
+            if (end - i > 1) sort_run(&sorted[i], &order[i], end - i);
             i = end;
         }
     });
-    return order;
+    codes.swap(sorted);
 }
 
 }  // namespace
@@ -120,7 +121,7 @@ std::vector<uint32_t> radix_sort(std::vector<uint64_t>& codes) {
 MortonOrder sort_by_morton_code(const std::vector<PrimRef>& refs) {
     MortonOrder sorted;
     sorted.codes = morton_codes(refs);
-    sorted.order = radix_sort(sorted.codes);
+    radix_sort(sorted.codes, sorted.order);
     return sorted;
 }
 

@@ -71,9 +71,10 @@ std::vector<uint64_t> reference_codes(const std::vector<PrimRef>& refs) {
 }  // namespace
 
 TEST_CASE("Morton order is a stable sort of the centroids' codes", "[builders][clustering]") {
-    // A spread-out surface, plus clusters that tie in the radix-sorted top bits: short runs, one long run of
-    // distinct codes (a cloud of tiny triangles), and identical centroids (equal codes keep index order).
-    std::vector<Triangle> tris = flatten(load_scene("gen:surface?tris=20000&seed=3")).triangles;
+    // A spread-out surface, large enough that the sort splits it into chunks, plus clusters that tie in the
+    // radix-sorted top bits: short runs, one long run of distinct codes (a cloud of tiny triangles), and identical
+    // centroids (equal codes keep index order).
+    std::vector<Triangle> tris = flatten(load_scene("gen:surface?tris=100000&seed=3")).triangles;
     for (int i = 0; i < 500; ++i) {
         const Vec3 p(0.1f + 1e-6f * float(i % 37), 0.2f + 1e-6f * float(i % 11), 0.3f + 1e-6f * float(i % 5));
         tris.push_back({p, p + Vec3(1e-7f, 0, 0), p + Vec3(0, 1e-7f, 0)});
