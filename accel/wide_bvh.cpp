@@ -1,6 +1,8 @@
 #include "accel/wide_bvh.h"
 #include "accel/parallel.h"
 
+#include <immintrin.h>
+
 #include <algorithm>
 #include <array>
 #include <bit>
@@ -23,6 +25,27 @@ using Cursor = Extent;
 
 // Marks the lanes past a merged subtree's last ref (Collapser::merges).
 constexpr uint32_t kNoRef = 0xffffffffu;
+
+// Copies a leaf block to the leaf array with non-temporal stores, in whole vectors where its size and alignment
+// allow. Such stores are weakly ordered: the thread that made them calls stream_fence() before others may read.
+template <class Block>
+void stream(Block* to, const Block& from) {
+#if defined(__AVX__)
+    if constexpr (sizeof(Block) % 32 == 0 && alignof(Block) >= 32) {
+        for (size_t k = 0; k < sizeof(Block) / 32; ++k)
+            _mm256_stream_si256(reinterpret_cast<__m256i*>(to) + k, _mm256_load_si256(reinterpret_cast<const __m256i*>(&from) + k));
+        return;
+    }
+#endif
+    if constexpr (sizeof(Block) % 16 == 0 && alignof(Block) >= 16) {
+        for (size_t k = 0; k < sizeof(Block) / 16; ++k)
+            _mm_stream_si128(reinterpret_cast<__m128i*>(to) + k, _mm_load_si128(reinterpret_cast<const __m128i*>(&from) + k));
+        return;
+    }
+    *to = from;
+}
+
+inline void stream_fence() { _mm_sfence(); }
 
 // A wide node's children as binary nodes (Ganestam and Doggett 2016, sec. 4.2): the binary node's two children,
 // then repeatedly the inner child of largest surface area (the first of equals) replaced by its two children
@@ -103,7 +126,7 @@ public:
         sink_.reserve(total);
         Cursor at{1, 0, 0};
         if (lone_leaf)
-            write_node(WideChildren<N>(0), 0, at, nullptr);
+            write_node(WideChildren<N>(0), 0, at, nullptr), stream_fence();
         else
             fill(0, 0, 0, 0, at);
         return total;
@@ -239,7 +262,8 @@ private:
             children.merged |= 1u << i;
             merged[merged_count++] = refs;
         }
-        write_node(children, self, at, merged.data());
+        const std::array<uint32_t, N> slots = write_node(children, self, at, merged.data());
+        stream_fence();
         std::array<Cursor, N> start;
         for (int i = 0; i < children.count; ++i) {
             if (!is_node(children, i)) continue;
@@ -249,7 +273,7 @@ private:
         }
         parallel::for_each(size_t(children.count), 1, [&](size_t i) {
             if (is_node(children, int(i)))
-                fill(children.node[i], nodes_[self].child[i], depth + 1, path * N + uint32_t(i), start[i]);
+                fill(children.node[i], slots[i], depth + 1, path * N + uint32_t(i), start[i]);
         });
     }
 
@@ -276,19 +300,22 @@ private:
                 for (uint32_t lane = 0; lane < kLanes && (*ahead)[lane] != kNoRef; ++lane) sink_.prefetch((*ahead)[lane]);
             const uint32_t slot = slots.back();
             slots.pop_back();
-            write_node(children, slot, at, merged);
+            const std::array<uint32_t, N> child = write_node(children, slot, at, merged);
             merged += merged_here;
             for (int i = children.count - 1; i >= 0; --i)
-                if (is_node(children, i)) slots.push_back(nodes_[slot].child[i]);
+                if (is_node(children, i)) slots.push_back(child[i]);
         }
+        stream_fence();
     }
 
     // Writes node `self`: inner children take the next node slots, leaf children the next entries, the
     // one-triangle leaves among them sharing blocks where the sink shares them; merged children take the refs
-    // from `merged` in child order.
-    void write_node(const WideChildren<N>& children, uint32_t self, Cursor& at, const Refs* merged) {
-        WideNode<N>& node = nodes_[self];
-        uint32_t shared_block = 0, shared_lanes = kLanes;  // the block one-triangle leaves are filling
+    // from `merged` in child order. Returns the node's `child` slots, so that callers need not read back what was
+    // streamed.
+    std::array<uint32_t, N> write_node(const WideChildren<N>& children, uint32_t self, Cursor& at, const Refs* merged) {
+        WideNode<N> node;  // assembled aside and streamed, as leaf blocks are
+        uint32_t shared_block = 0, shared_lanes = 0;  // the block one-triangle leaves are filling, its lanes in use
+        Refs shared_refs;                              // their refs: the block is written when full or at the end
         for (int i = 0; i < N; ++i) {
             if (i >= children.count) {
                 set_box(node, i, BBox{});  // lower = +inf, upper = -inf: never hit
@@ -308,19 +335,23 @@ private:
             } else if (!c.is_leaf()) {
                 node.child[i] = at.nodes++;
             } else if (shares_block(c)) {
-                if (shared_lanes == kLanes) shared_block = at.entries++, shared_lanes = 0;
-                node.child[i] = shared_block;
-                ++at.leaves;
-                if constexpr (LeafSink::kSharesBlocks) sink_.shared(shared_block, shared_lanes, c.index);
-                ++shared_lanes;
+                if constexpr (kMerges) {
+                    if (shared_lanes == 0) shared_block = at.entries++, shared_refs.fill(kNoRef);
+                    node.child[i] = shared_block;
+                    ++at.leaves;
+                    shared_refs[shared_lanes++] = c.index;
+                    if (shared_lanes == kLanes) sink_.gathered(shared_block, shared_refs), shared_lanes = 0;
+                }
             } else {
                 node.child[i] = at.entries;
                 sink_.own(at.leaves++, LeafRun{at.entries, c.index, c.count});
                 at.entries += entries_(N, c.count);
             }
         }
-        if constexpr (LeafSink::kSharesBlocks)
-            if (shared_lanes < kLanes) sink_.pad(shared_block, shared_lanes);
+        if constexpr (kMerges)
+            if (shared_lanes > 0) sink_.gathered(shared_block, shared_refs);
+        stream(&nodes_[self], node);
+        return std::to_array(node.child);
     }
 
     static constexpr bool kMerges = LeafSink::kSharesBlocks;
@@ -370,6 +401,7 @@ template <int N>
 struct TriangleLeaves {
     static constexpr bool kSharesBlocks = N > 2;
     static constexpr uint32_t kLanes = uint32_t(block_lanes(N));
+    using Leaf = typename WideBvh<N>::Leaf;
     WideBvh<N>& out;
     const Bvh& bvh;
     std::span<const Triangle> triangles;
@@ -384,37 +416,41 @@ struct TriangleLeaves {
     }
 
     void own(uint32_t, const LeafRun& run) {
-        for (uint32_t i = 0; i < run.count; ++i) {
-            const uint32_t prim = bvh.refs[run.first_ref + i];
-            if constexpr (N == 2)
+        if constexpr (N == 2) {
+            for (uint32_t i = 0; i < run.count; ++i) {
+                const uint32_t prim = bvh.refs[run.first_ref + i];
                 put_triangle(out.leaves[run.first_entry + i], prim, triangles[prim]);
-            else
-                put_triangle(out.leaves[run.first_entry + i / kLanes], i % kLanes, prim, triangles[prim]);
+            }
+        } else {
+            for (uint32_t first = 0; first < run.count; first += kLanes) {
+                std::array<uint32_t, kLanes> refs;
+                refs.fill(kNoRef);
+                for (uint32_t lane = 0; lane < kLanes && first + lane < run.count; ++lane) refs[lane] = run.first_ref + first + lane;
+                gathered(run.first_entry + first / kLanes, refs);
+            }
         }
-        if constexpr (N > 2)
-            if (run.count % kLanes) pad(run.first_entry + run.count / kLanes, run.count % kLanes);
     }
 
-    // A merged subtree's triangles (refs up to the first kNoRef) in one block; returns how many.
+    // One block of the triangles of `refs` (up to the first kNoRef), a lane each in order; returns how many. The
+    // block is assembled aside and then streamed to the leaf array, which traversal reads only later: a plain store
+    // would first fetch every line it writes.
     uint32_t gathered(uint32_t entry, const std::array<uint32_t, kLanes>& refs) {
+        static const Leaf empty = empty_block();
+        Leaf block = empty;
         uint32_t lane = 0;
         for (; lane < kLanes && refs[lane] != kNoRef; ++lane) {
             const uint32_t prim = bvh.refs[refs[lane]];
-            put_triangle(out.leaves[entry], lane, prim, triangles[prim]);
+            put_triangle(block, lane, prim, triangles[prim]);
         }
-        pad(entry, lane);
+        stream(&out.leaves[entry], block);
         return lane;
     }
 
-    void shared(uint32_t entry, uint32_t lane, uint32_t ref) {
-        const uint32_t prim = bvh.refs[ref];
-        put_triangle(out.leaves[entry], lane, prim, triangles[prim]);
-    }
-
-    // Lanes past the last triangle: a degenerate triangle at the origin, never hit.
-    void pad(uint32_t entry, uint32_t from_lane) {
-        for (uint32_t lane = from_lane; lane < kLanes; ++lane)
-            put_triangle(out.leaves[entry], lane, WideBvh<N>::Leaf::kNone, Triangle{Vec3(0), Vec3(0), Vec3(0)});
+    // Lanes holding no triangle: a degenerate triangle at the origin, never hit.
+    static Leaf empty_block() {
+        Leaf block;
+        for (uint32_t lane = 0; lane < kLanes; ++lane) put_triangle(block, lane, Leaf::kNone, Triangle{Vec3(0), Vec3(0), Vec3(0)});
+        return block;
     }
 };
 
