@@ -55,9 +55,18 @@ struct SplitReport {
     uint64_t reference_capacity = 0; // PrimRef slots allocated for references, against the refs in the tree
 };
 
+// A subtree's refs when they are consecutive in Bvh::refs: the first and how many.
+struct SubtreeRefs {
+    uint32_t first, count;
+};
+
 struct Bvh {
     BvhNodes nodes;  // nodes[0] is the root; resize() leaves the new nodes unwritten
     std::vector<uint32_t> refs;  // triangle ids, leaf by leaf
+    // Optional, by node, from a builder that knows it for free and whose every leaf holds one ref, in refs' order
+    // from left to right (LBVH): the node's subtree's refs. Empty otherwise. Code that rewrites such a builder's
+    // tree (an optimiser, collapsing leaves) clears it.
+    std::vector<SubtreeRefs> one_ref_leaves;
     SplitReport split;
 };
 

@@ -33,7 +33,8 @@ struct Dissimilarity {
 // the split between l - 1 and l, whichever neighbour is less dissimilar. The first child to reach a split
 // leaves its range end there and stops; the second completes the parent. Inner node k (the split between
 // leaves k and k + 1) keeps its children at slots 2k + 1 and 2k + 2, so every slot is used once, siblings are
-// adjacent, and Morton order keeps neighbouring nodes near each other; the root goes to slot 0.
+// adjacent, and Morton order keeps neighbouring nodes near each other; the root goes to slot 0. Leaf i holds ref
+// i, so a node over [l, r] holds refs l to r: the tree's one_ref_leaves, which spare the wide collapse its walks.
 Bvh build_lbvh(BuildInput&& input, const BuildSettings&) {
     const std::vector<PrimRef>& refs = input.refs;
     const uint32_t n = uint32_t(refs.size());
@@ -45,6 +46,7 @@ Bvh build_lbvh(BuildInput&& input, const BuildSettings&) {
     parallel::fork_join(n, kGrain, [&] { sorted = sort_by_morton_code(refs); }, [&] {
         bvh.refs.resize(n);
         bvh.nodes.resize(2 * size_t(n) - 1);
+        bvh.one_ref_leaves.resize(2 * size_t(n) - 1);
         other_end = std::vector<std::atomic<uint32_t>>(n - 1);
     });
     const std::vector<uint64_t>& codes = sorted.codes;
@@ -62,12 +64,14 @@ Bvh build_lbvh(BuildInput&& input, const BuildSettings&) {
             const bool left_child = l == 0 || (r != n - 1 && dissimilarity.less(r, l - 1));
             const uint32_t parent = left_child ? r : l - 1;
             bvh.nodes[2 * parent + (left_child ? 1 : 2)] = node;
+            bvh.one_ref_leaves[2 * parent + (left_child ? 1 : 2)] = {l, r - l + 1};
             const uint32_t sibling_end = other_end[parent].exchange((left_child ? l : r) + 1, std::memory_order_acq_rel);
             if (sibling_end == 0) return;
             (left_child ? r : l) = sibling_end - 1;
             node = {merge(bvh.nodes[2 * parent + 1].bounds, bvh.nodes[2 * parent + 2].bounds), 2 * parent + 1, 0};
         }
         bvh.nodes[0] = node;
+        bvh.one_ref_leaves[0] = {0, n};
     });
     return bvh;
 }

@@ -49,6 +49,7 @@ private:
 Bvh build_lbvh_sah(BuildInput&& input, const BuildSettings& settings) {
     Bvh bvh = build_lbvh(std::move(input), settings);
     if (bvh.nodes.empty()) return bvh;
+    bvh.one_ref_leaves.clear();
     LeafCollapser(bvh, settings).collapse(0, 0);
     bvh.nodes = compact_sparse_nodes(bvh.nodes.data());  // drops the nodes beneath the new leaves
     return bvh;

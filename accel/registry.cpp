@@ -57,7 +57,9 @@ const BuilderEntry& find_builder(const std::string& name) {
 Bvh build_start_tree(BuildInput&& input, const BuildSettings& settings, const char* default_start) {
     BuildSettings start_settings = settings;
     start_settings.start.clear();
-    return find_builder(settings.start.empty() ? default_start : settings.start).build(std::move(input), start_settings);
+    Bvh start = find_builder(settings.start.empty() ? default_start : settings.start).build(std::move(input), start_settings);
+    start.one_ref_leaves.clear();  // the optimiser rewrites the tree
+    return start;
 }
 
 }  // namespace canopy

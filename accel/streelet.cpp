@@ -17,6 +17,7 @@ Bvh build_streelet(BuildInput&& input, const BuildSettings& settings) {
     };
     auto lbvh_then_treelets = [](BuildInput&& pieces, const BuildSettings& s) {
         Bvh bvh = build_lbvh(std::move(pieces), s);
+        bvh.one_ref_leaves.clear();
         optimise_treelets(bvh, s);
         return bvh;
     };

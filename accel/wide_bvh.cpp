@@ -95,8 +95,8 @@ struct WideChildren {
 // written as one leaf of those triangles, in the subtree's depth-first order: its wide node would hold only
 // those leaves, and a ray that reaches it pays a node test for the box tests the block test makes anyway. On
 // crytek-sponza's LBVH (one triangle per leaf) that is 81% of the BVH8 nodes. The first pass finds such a
-// subtree by a walk that gives up past a block's lanes, and keeps its refs for the second, which reads them in
-// order and fetches their triangles ahead.
+// subtree by a walk that gives up past a block's lanes (or, for an LBVH, from its subtrees' ref ranges), and keeps
+// its refs for the second, which reads them in order and fetches their triangles ahead.
 template <int N, class LeafSink>
 class Collapser {
     static constexpr uint32_t kLanes = uint32_t(block_lanes(N));
@@ -190,6 +190,12 @@ private:
     bool merges(uint32_t index, Refs& refs) const {
         refs.fill(kNoRef);
         if (!kMerges || bvh_.nodes[index].is_leaf()) return false;
+        if (bvh_.one_ref_leaves.size() == bvh_.nodes.size()) {  // no walk: the builder knows the subtree's refs
+            const SubtreeRefs subtree = bvh_.one_ref_leaves[index];
+            if (subtree.count > kLanes) return false;
+            for (uint32_t k = 0; k < subtree.count; ++k) refs[k] = subtree.first + k;
+            return true;
+        }
         Refs found = refs;
         std::array<uint32_t, kLanes + 2> stack;
         uint32_t n = 0;
