@@ -125,10 +125,12 @@ public:
         nodes_.resize(total.nodes);
         sink_.reserve(total);
         Cursor at{1, 0, 0};
-        if (lone_leaf)
-            write_node(WideChildren<N>(0), 0, at, nullptr), stream_fence();
-        else
+        if (lone_leaf) {
+            write_node(WideChildren<N>(0), 0, at, nullptr);
+            stream_fence();
+        } else {
             fill(0, 0, 0, 0, at);
+        }
         return total;
     }
 
