@@ -171,7 +171,7 @@ private:
     // Measures a subtree below the top levels (its root not merged), appending its wide nodes in depth-first order.
     Extent record(uint32_t index, Recorded& out) {
         WideChildren<N> children(bvh_, index);
-        prefetch_grandchildren(children);
+        if (!has_ranges()) prefetch_grandchildren(children);
         for (int i = 0; i < children.count; ++i) {
             Refs refs;
             if (merges(children.node[i], refs)) {
@@ -192,7 +192,7 @@ private:
     bool merges(uint32_t index, Refs& refs) const {
         refs.fill(kNoRef);
         if (!kMerges || bvh_.nodes[index].is_leaf()) return false;
-        if (bvh_.one_ref_leaves.size() == bvh_.nodes.size()) {  // no walk: the builder knows the subtree's refs
+        if (has_ranges()) {  // no walk: the builder knows the subtree's refs
             const SubtreeRefs subtree = bvh_.one_ref_leaves[index];
             if (subtree.count > kLanes) return false;
             for (uint32_t k = 0; k < subtree.count; ++k) refs[k] = subtree.first + k;
@@ -217,6 +217,9 @@ private:
         refs = found;
         return true;
     }
+
+    // Whether the tree carries its subtrees' ref ranges (Bvh::one_ref_leaves), which replace the walks of merges().
+    bool has_ranges() const { return bvh_.one_ref_leaves.size() == bvh_.nodes.size(); }
 
     // The walks of merges() are chains of dependent loads, bound by latency: fetch the next level of every child's
     // subtree at once (WideChildren fetched the children's own children).
