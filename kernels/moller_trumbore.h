@@ -15,7 +15,7 @@ namespace canopy {
 
 class MollerTrumboreRay {
 public:
-    explicit MollerTrumboreRay(const Ray& ray) : org_(ray.org), dir_(ray.dir) {
+    [[gnu::always_inline]] explicit MollerTrumboreRay(const Ray& ray) : org_(ray.org), dir_(ray.dir) {
         for (int a = 0; a < 3; ++a) org_lanes_[a] = simd::broadcast(org_[a]), dir_lanes_[a] = simd::broadcast(dir_[a]);
     }
 

@@ -45,7 +45,7 @@ struct SlabRay {
     Vec3 org, inv_dir, inv_dir_far;
     int near[3], far[3];
 
-    explicit SlabRay(const Ray& ray)
+    [[gnu::always_inline]] explicit SlabRay(const Ray& ray)
         : org(ray.org), inv_dir(1.0f / ray.dir.x, 1.0f / ray.dir.y, 1.0f / ray.dir.z), inv_dir_far(inv_dir * kRobustFarScale) {
         for (int a = 0; a < 3; ++a) {
             const bool positive = !std::signbit(inv_dir[a]);
@@ -62,7 +62,7 @@ struct SlabLanes {
     typename S::F org[3], inv[3], inv_far[3], org_inv[3];
     int near[3], far[3];
 
-    explicit SlabLanes(const SlabRay<N>& r) {
+    [[gnu::always_inline]] explicit SlabLanes(const SlabRay<N>& r) {
         for (int a = 0; a < 3; ++a) {
             org[a] = S::set1(r.org[a]), inv[a] = S::set1(r.inv_dir[a]), inv_far[a] = S::set1(r.inv_dir_far[a]);
             org_inv[a] = S::mul(org[a], inv[a]);
@@ -77,7 +77,7 @@ struct SlabLanes {
 // compute the same values: the interval is the maximum of tmin and the near distances, the minimum of tmax and
 // the far ones, NaNs left out, whatever the order of evaluation.
 template <bool Robust, int N>
-inline uint32_t intersect_children(const WideNode<N>& node, const SlabRay<N>& r, float tmin, float tmax,
+[[gnu::always_inline]] inline uint32_t intersect_children(const WideNode<N>& node, const SlabRay<N>& r, float tmin, float tmax,
                                    std::array<float, N>& tnear) {
     const float* planes = node.planes;
     uint32_t mask = 0;
@@ -101,7 +101,7 @@ inline uint32_t intersect_children(const WideNode<N>& node, const SlabRay<N>& r,
 // thread, recorded path-tracer rays). Each max and min takes its NaN-free operand second, as _mm*_max_ps returns
 // the second operand on a NaN.
 template <bool Robust, int N>
-inline uint32_t intersect_children(const WideNode<N>& node, const SlabLanes<N>& r, typename simd::Simd<N>::F tmin,
+[[gnu::always_inline]] inline uint32_t intersect_children(const WideNode<N>& node, const SlabLanes<N>& r, typename simd::Simd<N>::F tmin,
                                    float tmax, std::array<float, N>& tnear) {
     using S = simd::Simd<N>;
     using F = typename S::F;
@@ -130,14 +130,14 @@ struct StackEntry {
 
 // Prefetches every cache line of a node (one for BVH2, two for BVH4, four for BVH8), or a leaf's first lines.
 template <int N, class Leaf>
-inline void prefetch(const WideNode<N>* nodes, const Leaf* leaves, const StackEntry& e) {
+[[gnu::always_inline]] inline void prefetch(const WideNode<N>* nodes, const Leaf* leaves, const StackEntry& e) {
     const char* p = e.count == 0 ? reinterpret_cast<const char*>(nodes + e.child) : reinterpret_cast<const char*>(leaves + e.child);
     for (size_t line = 0; line < sizeof(WideNode<N>); line += 64) _mm_prefetch(p + line, _MM_HINT_T0);
 }
 
 // Intersects a leaf's triangles; true when a hit was recorded.
 template <int N, class TriangleTest, class Counter>
-inline bool intersect_leaf(const WideBvh<N>& bvh, const StackEntry& leaf, const TriangleTest& tri_ray, float tmin,
+[[gnu::always_inline]] inline bool intersect_leaf(const WideBvh<N>& bvh, const StackEntry& leaf, const TriangleTest& tri_ray, float tmin,
                            Hit& hit, Counter& counter) {
     counter.leaf();
     counter.triangles(leaf.count);
@@ -163,7 +163,7 @@ using NodeRay = std::conditional_t<N == 2, SlabRay<N>, SlabLanes<N>>;
 // recorded a hit. `hit.t` is the running far limit, held in a local between hits. Tree is anything with `nodes`
 // (WideNode<N>) and `leaves`. Returns true when an any-hit query may stop.
 template <Query Q, bool Robust, int N, class Tree, class Counter, class LeafFn>
-bool traverse_from(const Tree& tree, StackEntry start, const SlabRay<N>& box_ray, float tmin, Hit& hit,
+[[gnu::always_inline]] inline bool traverse_from(const Tree& tree, StackEntry start, const SlabRay<N>& box_ray, float tmin, Hit& hit,
                    Counter& counter, LeafFn&& leaf) {
     // Locals the loop's stores cannot alias, so the compiler keeps them in registers (a node's address is then one
     // multiply-add away, not two dependent loads through `tree`).
@@ -229,9 +229,12 @@ bool traverse_from(const Tree& tree, StackEntry start, const SlabRay<N>& box_ray
 }  // namespace detail
 
 // Closest hit (Query::Closest) or any hit (Query::Any) in (ray.tmin, ray.tmax]. For Any, `hit` holds the
-// first hit found, not the closest.
+// first hit found, not the closest. One out-of-line function per kernel with every piece of the loop forced
+// inline: in the renderer's translation unit, which instantiates every width, mode and top level, GCC had left
+// the node test a call per node reading the ray through memory (crytek-sponza bvh8 frames 1.29x Embree MEDIUM's
+// before, 1.22x after; bunny 1.30x, 1.20x). Inlining the whole traversal into the path tracer measured slower.
 template <Query Q, bool Robust = true, class TriangleTest = WatertightRay, int N, class Counter = NoCount>
-bool traverse(const WideBvh<N>& bvh, const Ray& ray, Hit& hit, Counter&& counter = {}) {
+[[gnu::noinline]] bool traverse(const WideBvh<N>& bvh, const Ray& ray, Hit& hit, Counter&& counter = {}) {
     hit = Hit{};
     hit.t = ray.tmax;
     if (bvh.nodes.empty()) return false;

@@ -64,8 +64,9 @@ template <Query Q, bool Robust, class TriangleTest, int N, class Counter>
 
 }  // namespace detail
 
+// Out of line with its loop inlined, as the flat traverse().
 template <Query Q, bool Robust = true, class TriangleTest = WatertightRay, int N, class Counter = NoCount>
-bool traverse(const TwoLevelBvh<N>& bvh, const Ray& ray, Hit& hit, Counter&& counter = {}) {
+[[gnu::noinline]] bool traverse(const TwoLevelBvh<N>& bvh, const Ray& ray, Hit& hit, Counter&& counter = {}) {
     hit = Hit{};
     hit.t = ray.tmax;
     if (bvh.brefs == 0) return false;

@@ -26,7 +26,7 @@ inline float difference_of_products(float a, float b, float c, float d) {
 
 class WatertightRay {
 public:
-    explicit WatertightRay(const Ray& ray) : org_(ray.org) {
+    [[gnu::always_inline]] explicit WatertightRay(const Ray& ray) : org_(ray.org) {
         const Vec3 a = glm::abs(ray.dir);
         kz_ = a.x >= a.y ? (a.x >= a.z ? 0 : 2) : (a.y >= a.z ? 1 : 2);  // sec. 3: largest |dir| axis
         kx_ = (kz_ + 1) % 3;
