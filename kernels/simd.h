@@ -40,6 +40,7 @@ struct Simd<4> {
     static F sub(F a, F b) { return _mm_sub_ps(a, b); }
     static F mul(F a, F b) { return _mm_mul_ps(a, b); }
     static F div(F a, F b) { return _mm_div_ps(a, b); }
+    static F fmadd(F a, F b, F c) { return _mm_fmadd_ps(a, b, c); }
     static F fmsub(F a, F b, F c) { return _mm_fmsub_ps(a, b, c); }
     static F fnmadd(F a, F b, F c) { return _mm_fnmadd_ps(a, b, c); }
     static F max(F a, F b) { return _mm_max_ps(a, b); }
@@ -70,6 +71,7 @@ struct Simd<8> {
     static F sub(F a, F b) { return _mm256_sub_ps(a, b); }
     static F mul(F a, F b) { return _mm256_mul_ps(a, b); }
     static F div(F a, F b) { return _mm256_div_ps(a, b); }
+    static F fmadd(F a, F b, F c) { return _mm256_fmadd_ps(a, b, c); }
     static F fmsub(F a, F b, F c) { return _mm256_fmsub_ps(a, b, c); }
     static F fnmadd(F a, F b, F c) { return _mm256_fnmadd_ps(a, b, c); }
     static F max(F a, F b) { return _mm256_max_ps(a, b); }

@@ -1,8 +1,7 @@
 #pragma once
 // Stack-based traversal of a WideBvh<N>, one template for every width: children tested in one pass (scalar
-// for N = 2, SSE for N = 4, AVX for N = 8), visited near to far. Robust = true pads the far slab distance
-// so rounding never culls a box the ray crosses (Ize 2013, "Robust BVH Ray Traversal"); Robust = false is
-// the fast mode. TriangleTest is WatertightRay (default) or MollerTrumboreRay (fast mode). A Counter other
+// for N = 2, SSE for N = 4, AVX for N = 8), visited near to far. Robust = true pads the slab distances so
+// rounding never culls a box the ray crosses (see SlabRay); Robust = false is the fast mode. TriangleTest is WatertightRay (default) or MollerTrumboreRay (fast mode). A Counter other
 // than NoCount records inner nodes, leaves and triangles visited; with NoCount the calls compile to nothing.
 #include "accel/wide_bvh.h"
 #include "kernels/moller_trumbore.h"
@@ -11,13 +10,25 @@
 
 #include <immintrin.h>
 
+#include <algorithm>
 #include <array>
 #include <bit>
 
 namespace canopy {
 
-// 1 + 2 gamma(3), gamma(n) = n u / (1 - n u) with u = 2^-24 (Ize 2013, sec. 3; pbrt-v4 eq. 6.21)
-constexpr float kRobustFarScale = 1.0f + 2.0f * (3.0f * 0x1p-24f) / (1.0f - 3.0f * 0x1p-24f);
+// A bound on the magnitude of every plane coordinate of a tree, per axis, from a box holding all of its boxes
+// (a tree's root box: every builder's boxes nest, which the builder tests check).
+inline Vec3 plane_bound(const BBox& bounds) { return glm::max(glm::abs(bounds.lower), glm::abs(bounds.upper)); }
+
+// Robust mode's padding of the slab distances, relative to R |inv_dir| (see SlabRay): 16 u, u = 2^-24. The bound
+// it covers is about 5 u, plus the rounding of the padding itself.
+constexpr float kRobustPad = 0x1p-20f;
+
+// The smallest direction component the slab test divides by; smaller ones, zeros included, count as this with
+// their sign, so every axis keeps culling (see SlabRay).
+constexpr float kMinSlabDir = 0x1p-64f;
+
+inline float slab_inverse(float d) { return 1.0f / (std::abs(d) < kMinSlabDir ? std::copysign(kMinSlabDir, d) : d); }
 
 enum class Query { Closest, Any };
 
@@ -36,18 +47,36 @@ struct TraversalCounts {
 
 namespace detail {
 
-// Per-ray slab data: the origin, reciprocal direction, the reciprocal padded for far planes, and for each axis
-// the offsets of the near and far planes in WideNode::planes, chosen once by the direction's sign. Robust mode
-// multiplies far distances by kRobustFarScale through inv_dir_far: one rounding of the padded reciprocal, as
-// many as rounding the padded distance would cost, with the multiplication off every node's critical path.
+// Per-ray slab data. Every slab distance is one FMA, plane * inv_dir + add, as in Embree's default traversal,
+// with `add` = -org * inv_dir; the near and far planes of each axis are reached by offsets into
+// WideNode::planes chosen once by the direction's sign.
+//
+// Robust mode (Ize 2013's guarantee, "Robust BVH Ray Traversal", by other means) lowers the near planes' addend
+// and raises the far planes' by pad = kRobustPad R |inv_dir|, R = P + |org| with P and |org| the largest
+// magnitudes of the tree's plane coordinates and of the origin over the three axes. Against the exact
+// (plane - org) / dir, the FMA form rounds 1/dir, org * inv_dir, the addend and the FMA itself, each within u of
+// a value at most R |inv_dir|: together under 5 u R |inv_dir|, less than pad, so a box the ray touches is never
+// culled, at any coordinates. Ize's relative padding needs the exact difference plane - org, a subtraction and a
+// multiplication per slab: this costs one FMA, as the fast mode does. In world units it widens boxes by 16 u R, a
+// few float spacings of the scene's coordinates.
+// A component under kMinSlabDir (a zero, say) is taken as kMinSlabDir: that only shrinks the axis's distances,
+// which lowers near ones (conservative), and its far distances stay above pad >= 2^-20 2^64 R, past every point
+// of the scene (within R of the origin on every axis) for a ray whose largest component exceeds 2^-40. A pad
+// that overflows makes the axis's distances infinite or NaN, never culling: conservative too.
 template <int N>
 struct SlabRay {
-    Vec3 org, inv_dir, inv_dir_far;
+    Vec3 inv_dir, near_add, far_add;
     int near[3], far[3];
 
-    [[gnu::always_inline]] explicit SlabRay(const Ray& ray)
-        : org(ray.org), inv_dir(1.0f / ray.dir.x, 1.0f / ray.dir.y, 1.0f / ray.dir.z), inv_dir_far(inv_dir * kRobustFarScale) {
+    [[gnu::always_inline]] SlabRay(const Ray& ray, const Vec3& plane_bound, bool robust)
+        : inv_dir(slab_inverse(ray.dir.x), slab_inverse(ray.dir.y), slab_inverse(ray.dir.z)) {
+        const Vec3 magnitude = plane_bound + glm::abs(ray.org);
+        const float reach = robust ? kRobustPad * std::max({magnitude.x, magnitude.y, magnitude.z}) : 0.0f;
         for (int a = 0; a < 3; ++a) {
+            const float add = -(ray.org[a] * inv_dir[a]);
+            const float pad = reach * std::abs(inv_dir[a]);
+            near_add[a] = add - pad;
+            far_add[a] = add + pad;
             const bool positive = !std::signbit(inv_dir[a]);
             near[a] = (positive ? 0 : 3 * N) + a * N;
             far[a] = (positive ? 3 * N : 0) + a * N;
@@ -59,33 +88,32 @@ struct SlabRay {
 template <int N>
 struct SlabLanes {
     using S = simd::Simd<N>;
-    typename S::F org[3], inv[3], inv_far[3], org_inv[3];
+    typename S::F inv[3], near_add[3], far_add[3];
     int near[3], far[3];
 
     [[gnu::always_inline]] explicit SlabLanes(const SlabRay<N>& r) {
         for (int a = 0; a < 3; ++a) {
-            org[a] = S::set1(r.org[a]), inv[a] = S::set1(r.inv_dir[a]), inv_far[a] = S::set1(r.inv_dir_far[a]);
-            org_inv[a] = S::mul(org[a], inv[a]);
+            inv[a] = S::set1(r.inv_dir[a]), near_add[a] = S::set1(r.near_add[a]), far_add[a] = S::set1(r.far_add[a]);
             near[a] = r.near[a], far[a] = r.far[a];
         }
     }
 };
 
 // Slab test of every child box against [tmin, tmax]; returns a bit mask of the children hit and their entry
-// distances. A NaN from 0 * inf (origin on a slab plane, direction parallel to it) never replaces the
-// running interval, so such rays count as touching the box: conservative. The SIMD and scalar forms
-// compute the same values: the interval is the maximum of tmin and the near distances, the minimum of tmax and
-// the far ones, NaNs left out, whatever the order of evaluation.
-template <bool Robust, int N>
-[[gnu::always_inline]] inline uint32_t intersect_children(const WideNode<N>& node, const SlabRay<N>& r, float tmin, float tmax,
-                                   std::array<float, N>& tnear) {
+// distances. A NaN (from inf - inf: an overflowing pad) never replaces the running interval, so such an axis
+// never culls: conservative. The SIMD and scalar forms compute the same values: the
+// interval is the maximum of tmin and the near distances, the minimum of tmax and the far ones, NaNs left out,
+// whatever the order of evaluation.
+template <int N>
+[[gnu::always_inline]] inline uint32_t intersect_children(const WideNode<N>& node, const SlabRay<N>& r, float tmin,
+                                                          float tmax, std::array<float, N>& tnear) {
     const float* planes = node.planes;
     uint32_t mask = 0;
     for (int i = 0; i < N; ++i) {
         float t0 = tmin, t1 = tmax;
         for (int a = 0; a < 3; ++a) {
-            const float near_a = (planes[r.near[a] + i] - r.org[a]) * r.inv_dir[a];
-            const float far_a = (planes[r.far[a] + i] - r.org[a]) * (Robust ? r.inv_dir_far[a] : r.inv_dir[a]);
+            const float near_a = std::fma(planes[r.near[a] + i], r.inv_dir[a], r.near_add[a]);
+            const float far_a = std::fma(planes[r.far[a] + i], r.inv_dir[a], r.far_add[a]);
             t0 = near_a > t0 ? near_a : t0;
             t1 = far_a < t1 ? far_a : t1;
         }
@@ -96,25 +124,19 @@ template <bool Robust, int N>
 }
 
 // The same for N SIMD lanes. The three axes are combined as a tree seeded with tmin and tmax, not a chain, which
-// shortens each node's critical path (load, slab distances, interval, mask, next node); with the per-ray values in
-// registers and the padding in the reciprocal, crytek-sponza's closest-hit rays traced 8 to 10% faster (one
-// thread, recorded path-tracer rays). Each max and min takes its NaN-free operand second, as _mm*_max_ps returns
-// the second operand on a NaN.
-template <bool Robust, int N>
-[[gnu::always_inline]] inline uint32_t intersect_children(const WideNode<N>& node, const SlabLanes<N>& r, typename simd::Simd<N>::F tmin,
-                                   float tmax, std::array<float, N>& tnear) {
+// shortens each node's critical path (load, slab distances, interval, mask, next node). Each max and min takes its
+// NaN-free operand second, as _mm*_max_ps returns the second operand on a NaN.
+template <int N>
+[[gnu::always_inline]] inline uint32_t intersect_children(const WideNode<N>& node, const SlabLanes<N>& r,
+                                                          typename simd::Simd<N>::F tmin, float tmax,
+                                                          std::array<float, N>& tnear) {
     using S = simd::Simd<N>;
     using F = typename S::F;
     const float* planes = node.planes;
     F x[3], y[3];  // near and far distances per axis
     for (int a = 0; a < 3; ++a) {
-        if constexpr (Robust) {
-            x[a] = S::mul(S::sub(S::load(planes + r.near[a]), r.org[a]), r.inv[a]);
-            y[a] = S::mul(S::sub(S::load(planes + r.far[a]), r.org[a]), r.inv_far[a]);
-        } else {  // fast mode: plane * inv - org * inv in one FMA, as Embree's default traversal does
-            x[a] = S::fmsub(S::load(planes + r.near[a]), r.inv[a], r.org_inv[a]);
-            y[a] = S::fmsub(S::load(planes + r.far[a]), r.inv[a], r.org_inv[a]);
-        }
+        x[a] = S::fmadd(S::load(planes + r.near[a]), r.inv[a], r.near_add[a]);
+        y[a] = S::fmadd(S::load(planes + r.far[a]), r.inv[a], r.far_add[a]);
     }
     const F t_max = S::set1(tmax);
     const F t0 = S::max(S::max(x[1], tmin), S::max(x[2], S::max(x[0], tmin)));
@@ -162,7 +184,7 @@ using NodeRay = std::conditional_t<N == 2, SlabRay<N>, SlabLanes<N>>;
 // kernels enter object trees), children near to far, leaves handed to `leaf(entry)`, which returns true when it
 // recorded a hit. `hit.t` is the running far limit, held in a local between hits. Tree is anything with `nodes`
 // (WideNode<N>) and `leaves`. Returns true when an any-hit query may stop.
-template <Query Q, bool Robust, int N, class Tree, class Counter, class LeafFn>
+template <Query Q, int N, class Tree, class Counter, class LeafFn>
 [[gnu::always_inline]] inline bool traverse_from(const Tree& tree, StackEntry start, const SlabRay<N>& box_ray, float tmin, Hit& hit,
                    Counter& counter, LeafFn&& leaf) {
     // Locals the loop's stores cannot alias, so the compiler keeps them in registers (a node's address is then one
@@ -183,7 +205,7 @@ template <Query Q, bool Robust, int N, class Tree, class Counter, class LeafFn>
             counter.inner();
             const WideNode<N>& node = nodes[current.child];
             std::array<float, N> tnear;
-            uint32_t mask = intersect_children<Robust, N>(node, ray, t_min, tfar, tnear);
+            uint32_t mask = intersect_children<N>(node, ray, t_min, tfar, tnear);
             if (mask) {
                 const int a = std::countr_zero(mask);
                 mask &= mask - 1;
@@ -238,9 +260,9 @@ template <Query Q, bool Robust = true, class TriangleTest = WatertightRay, int N
     hit = Hit{};
     hit.t = ray.tmax;
     if (bvh.nodes.empty()) return false;
-    const detail::SlabRay<N> box_ray(ray);
+    const detail::SlabRay<N> box_ray(ray, plane_bound(bvh.bounds), Robust);
     const TriangleTest tri_ray(ray);
-    detail::traverse_from<Q, Robust>(bvh, {0, 0, ray.tmin}, box_ray, ray.tmin, hit, counter,
+    detail::traverse_from<Q>(bvh, {0, 0, ray.tmin}, box_ray, ray.tmin, hit, counter,
                                      [&](const detail::StackEntry& leaf) {
                                          return detail::intersect_leaf(bvh, leaf, tri_ray, ray.tmin, hit, counter);
                                      });

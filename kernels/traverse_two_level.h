@@ -15,11 +15,11 @@ namespace detail {
 
 // Traverses one object tree from `entry` with a ray already in its space; true when it recorded a hit.
 // tri_ray() gives the triangle test of that ray, asked for at the first leaf only.
-template <Query Q, bool Robust, int N, class TriangleRay, class Counter>
+template <Query Q, int N, class TriangleRay, class Counter>
 bool enter_object(const WideBvh<N>& pool, const TopLevelRef& entry, const SlabRay<N>& box_ray,
                   TriangleRay&& tri_ray, float tmin, Hit& hit, Counter& counter) {
     bool found = false;
-    traverse_from<Q, Robust>(pool, {entry.child, entry.count, tmin}, box_ray, tmin, hit, counter,
+    traverse_from<Q>(pool, {entry.child, entry.count, tmin}, box_ray, tmin, hit, counter,
                              [&](const StackEntry& leaf) {
                                  const bool here = intersect_leaf(pool, leaf, tri_ray(), tmin, hit, counter);
                                  found |= here;
@@ -42,7 +42,7 @@ template <Query Q, bool Robust, class TriangleTest, int N, class Counter>
         const PlacedObject& instance = bvh.instances[entry.instance];
         bool here;
         if (instance.identity) {
-            here = enter_object<Q, Robust>(bvh.pool, entry, world_box, [&]() -> const TriangleTest& { return world_tri; },
+            here = enter_object<Q>(bvh.pool, entry, world_box, [&]() -> const TriangleTest& { return world_tri; },
                                            ray.tmin, hit, counter);
         } else {
             // Direction is not renormalised, so distances along the ray stay world distances. The triangle test's
@@ -50,7 +50,7 @@ template <Query Q, bool Robust, class TriangleTest, int N, class Counter>
             // reach a leaf; frames 3% faster).
             const Ray local{instance.point(ray.org), instance.vector(ray.dir), ray.tmin, hit.t};
             std::optional<TriangleTest> local_tri;
-            here = enter_object<Q, Robust>(bvh.pool, entry, SlabRay<N>(local), [&]() -> const TriangleTest& {
+            here = enter_object<Q>(bvh.pool, entry, SlabRay<N>(local, plane_bound(bvh.objects[instance.object].bounds), Robust), [&]() -> const TriangleTest& {
                 if (!local_tri) local_tri.emplace(local);
                 return *local_tri;
             }, ray.tmin, hit, counter);
@@ -70,9 +70,9 @@ template <Query Q, bool Robust = true, class TriangleTest = WatertightRay, int N
     hit = Hit{};
     hit.t = ray.tmax;
     if (bvh.brefs == 0) return false;
-    const detail::SlabRay<N> world_box(ray);
+    const detail::SlabRay<N> world_box(ray, plane_bound(bvh.bounds), Robust);
     const TriangleTest world_tri(ray);
-    detail::traverse_from<Q, Robust>(bvh.pool, {bvh.root, 0, ray.tmin}, world_box, ray.tmin, hit,
+    detail::traverse_from<Q>(bvh.pool, {bvh.root, 0, ray.tmin}, world_box, ray.tmin, hit,
                                      counter, [&](const detail::StackEntry& leaf) {
         if (leaf.count & TwoLevelBvh<N>::kInstanceEntries)
             return detail::enter_instances<Q, Robust>(bvh, leaf, ray, world_box, world_tri, hit, counter);
