@@ -13,6 +13,7 @@
 #include <algorithm>
 #include <array>
 #include <bit>
+#include <optional>
 
 namespace canopy {
 
@@ -261,10 +262,11 @@ template <Query Q, bool Robust = true, class TriangleTest = WatertightRay, int N
     hit.t = ray.tmax;
     if (bvh.nodes.empty()) return false;
     const detail::SlabRay<N> box_ray(ray, plane_bound(bvh.bounds), Robust);
-    const TriangleTest tri_ray(ray);
+    std::optional<TriangleTest> tri_ray;
     detail::traverse_from<Q>(bvh, {0, 0, ray.tmin}, box_ray, ray.tmin, hit, counter,
                                      [&](const detail::StackEntry& leaf) {
-                                         return detail::intersect_leaf(bvh, leaf, tri_ray, ray.tmin, hit, counter);
+                                         if (!tri_ray) tri_ray.emplace(ray);
+                                         return detail::intersect_leaf(bvh, leaf, *tri_ray, ray.tmin, hit, counter);
                                      });
     return hit.found();
 }
