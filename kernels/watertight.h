@@ -26,22 +26,32 @@ inline float difference_of_products(float a, float b, float c, float d) {
 
 class WatertightRay {
 public:
+    // Without branches: the axes come from a comparison mask through tables, and coordinates are read by index
+    // from memory (glm's operator[] is a switch), since the choice follows the ray's direction, which no branch
+    // predictor can guess.
     [[gnu::always_inline]] explicit WatertightRay(const Ray& ray) : org_(ray.org) {
         const Vec3 a = glm::abs(ray.dir);
-        kz_ = a.x >= a.y ? (a.x >= a.z ? 0 : 2) : (a.y >= a.z ? 1 : 2);  // sec. 3: largest |dir| axis
-        kx_ = (kz_ + 1) % 3;
-        ky_ = (kx_ + 1) % 3;
-        if (ray.dir[kz_] < 0.0f) std::swap(kx_, ky_);  // keeps the triangle winding
-        sz_ = 1.0f / ray.dir[kz_];
-        sx_ = ray.dir[kx_] * sz_;
-        sy_ = ray.dir[ky_] * sz_;
+        // sec. 3: the largest |dir| axis, as a >= chain would choose it: bits x>=y, x>=z, y>=z to the axis
+        constexpr int kLargest[8] = {2, 2, 2, 0, 1, 2, 1, 0};
+        kz_ = kLargest[int(a.x >= a.y) | int(a.x >= a.z) << 1 | int(a.y >= a.z) << 2];
+        constexpr int kNext[3] = {1, 2, 0};
+        kx_ = kNext[kz_];
+        ky_ = kNext[kx_];
+        const float* dir = &ray.dir.x;
+        const int swap = (kx_ ^ ky_) & -int(dir[kz_] < 0.0f);  // a negative z swaps x and y: keeps the winding
+        kx_ ^= swap, ky_ ^= swap;
+        sz_ = 1.0f / dir[kz_];
+        sx_ = dir[kx_] * sz_;
+        sy_ = dir[ky_] * sz_;
+        const float* org = &org_.x;
         using simd::broadcast;
-        lanes_ = {{broadcast(org_[kx_]), broadcast(org_[ky_]), broadcast(org_[kz_])}, broadcast(sx_), broadcast(sy_), broadcast(sz_)};
+        lanes_ = {{broadcast(org[kx_]), broadcast(org[ky_]), broadcast(org[kz_])}, broadcast(sx_), broadcast(sy_), broadcast(sz_)};
     }
 
     // Intersects in (tmin, hit.t]; on a hit updates `hit` and returns true.
     bool intersect(const Vec3& p0, const Vec3& p1, const Vec3& p2, uint32_t prim, float tmin, Hit& hit) const {
-        const Vec3 a = p0 - org_, b = p1 - org_, c = p2 - org_;
+        const Vec3 a_vec = p0 - org_, b_vec = p1 - org_, c_vec = p2 - org_;
+        const float *a = &a_vec.x, *b = &b_vec.x, *c = &c_vec.x;
         // Sheared 2D coordinates (sec. 3, eq. 5)
         const float ax = a[kx_] - sx_ * a[kz_], ay = a[ky_] - sy_ * a[kz_];
         const float bx = b[kx_] - sx_ * b[kz_], by = b[ky_] - sy_ * b[kz_];
