@@ -94,7 +94,8 @@ struct Simd<8> {
 // Records in `hit` the nearest of the lanes in `lanes` (a bit mask of valid hits) and returns its lane, or -1
 // when there are none. Ties go to the later lane, as the scalar kernel's loop over a leaf's triangles does.
 template <class S>
-[[gnu::always_inline]] inline int record_nearest(uint32_t lanes, typename S::F t, typename S::F u, typename S::F v, const uint32_t* prim, Hit& hit) {
+[[gnu::always_inline]] inline int record_nearest(uint32_t lanes, typename S::F t, typename S::F u, typename S::F v,
+                                                  const uint32_t* prim, Hit& hit) {
     if (!lanes) return -1;
     constexpr int W = sizeof(typename S::F) / sizeof(float);
     alignas(32) float ts[W], us[W], vs[W];

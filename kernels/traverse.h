@@ -1,8 +1,9 @@
 #pragma once
 // Stack-based traversal of a WideBvh<N>, one template for every width: children tested in one pass (scalar
 // for N = 2, SSE for N = 4, AVX for N = 8), visited near to far. Robust = true pads the slab distances so
-// rounding never culls a box the ray crosses (see SlabRay); Robust = false is the fast mode. TriangleTest is WatertightRay (default) or MollerTrumboreRay (fast mode). A Counter other
-// than NoCount records inner nodes, leaves and triangles visited; with NoCount the calls compile to nothing.
+// rounding never culls a box the ray crosses (see SlabRay); Robust = false is the fast mode. TriangleTest is
+// WatertightRay (default) or MollerTrumboreRay (fast mode). A Counter other than NoCount records inner nodes,
+// leaves and triangles visited; with NoCount the calls compile to nothing.
 #include "accel/wide_bvh.h"
 #include "kernels/moller_trumbore.h"
 #include "kernels/simd.h"
@@ -31,7 +32,6 @@ constexpr float kRobustPad = 0x1p-21f;
 // The smallest direction component the slab test divides by; smaller ones, zeros included, count as this with
 // their sign, so every axis keeps culling (see SlabRay).
 constexpr float kMinSlabDir = 0x1p-64f;
-
 
 enum class Query { Closest, Any };
 
@@ -78,14 +78,17 @@ struct SlabRay {
         const __m128 dir = _mm_setr_ps(ray.dir.x, ray.dir.y, ray.dir.z, 1.0f);
         const __m128 org = _mm_setr_ps(ray.org.x, ray.org.y, ray.org.z, 0.0f);
         // |dir| raised to kMinSlabDir with dir's sign; a NaN stays NaN (max returns its second operand then).
-        const __m128 safe_dir = _mm_or_ps(_mm_max_ps(_mm_set1_ps(kMinSlabDir), _mm_andnot_ps(sign, dir)), _mm_and_ps(sign, dir));
+        const __m128 magnitude = _mm_max_ps(_mm_set1_ps(kMinSlabDir), _mm_andnot_ps(sign, dir));
+        const __m128 safe_dir = _mm_or_ps(magnitude, _mm_and_ps(sign, dir));
         const __m128 inv = _mm_div_ps(_mm_set1_ps(1.0f), safe_dir);
         const __m128 add = _mm_xor_ps(_mm_mul_ps(org, inv), sign);
         __m128 pad = _mm_setzero_ps();
         if (robust) {
             const __m128 abs_org = _mm_andnot_ps(sign, org);
-            const __m128 org_max = _mm_max_ps(abs_org, _mm_max_ps(_mm_movehdup_ps(abs_org), _mm_movehl_ps(abs_org, abs_org)));
-            const __m128 reach = _mm_mul_ps(_mm_set1_ps(kRobustPad), _mm_add_ps(_mm_set1_ps(plane_bound), _mm_broadcastss_ps(org_max)));
+            const __m128 yz = _mm_max_ps(_mm_movehdup_ps(abs_org), _mm_movehl_ps(abs_org, abs_org));
+            const __m128 org_max = _mm_max_ps(abs_org, yz);  // lane 0: the largest |org| component
+            const __m128 r = _mm_add_ps(_mm_set1_ps(plane_bound), _mm_broadcastss_ps(org_max));
+            const __m128 reach = _mm_mul_ps(_mm_set1_ps(kRobustPad), r);
             pad = _mm_mul_ps(reach, _mm_andnot_ps(sign, inv));
         }
         alignas(16) float lanes[3][4];
@@ -119,9 +122,9 @@ struct SlabLanes {
 
 // Slab test of every child box against [tmin, tmax]; returns a bit mask of the children hit and their entry
 // distances. A NaN (from inf - inf: an overflowing pad) never replaces the running interval, so such an axis
-// never culls: conservative. The SIMD and scalar forms compute the same values: the
-// interval is the maximum of tmin and the near distances, the minimum of tmax and the far ones, NaNs left out,
-// whatever the order of evaluation.
+// never culls: conservative. The SIMD and scalar forms compute the same values: the interval is the maximum of
+// tmin and the near distances, the minimum of tmax and the far ones, NaNs left out, whatever the order of
+// evaluation.
 template <int N>
 [[gnu::always_inline]] inline uint32_t intersect_children(const WideNode<N>& node, const SlabRay<N>& r, float tmin,
                                                           float tmax, std::array<float, N>& tnear) {
@@ -177,8 +180,8 @@ template <int N, class Leaf>
 
 // Intersects a leaf's triangles; true when a hit was recorded.
 template <int N, class TriangleTest, class Counter>
-[[gnu::always_inline]] inline bool intersect_leaf(const WideBvh<N>& bvh, const StackEntry& leaf, const TriangleTest& tri_ray, float tmin,
-                           Hit& hit, Counter& counter) {
+[[gnu::always_inline]] inline bool intersect_leaf(const WideBvh<N>& bvh, const StackEntry& leaf,
+                                                  const TriangleTest& tri_ray, float tmin, Hit& hit, Counter& counter) {
     counter.leaf();
     counter.triangles(leaf.count);
     bool found = false;
@@ -203,8 +206,8 @@ using NodeRay = std::conditional_t<N == 2, SlabRay<N>, SlabLanes<N>>;
 // recorded a hit. `hit.t` is the running far limit, held in a local between hits. Tree is anything with `nodes`
 // (WideNode<N>) and `leaves`. Returns true when an any-hit query may stop.
 template <Query Q, int N, class Tree, class Counter, class LeafFn>
-[[gnu::always_inline]] inline bool traverse_from(const Tree& tree, StackEntry start, const SlabRay<N>& box_ray, float tmin, Hit& hit,
-                   Counter& counter, LeafFn&& leaf) {
+[[gnu::always_inline]] inline bool traverse_from(const Tree& tree, StackEntry start, const SlabRay<N>& box_ray,
+                                                 float tmin, Hit& hit, Counter& counter, LeafFn&& leaf) {
     // Locals the loop's stores cannot alias, so the compiler keeps them in registers (a node's address is then one
     // multiply-add away, not two dependent loads through `tree`).
     const WideNode<N>* const nodes = tree.nodes.data();
@@ -281,10 +284,10 @@ template <Query Q, bool Robust = true, class TriangleTest = WatertightRay, int N
     const detail::SlabRay<N> box_ray(ray, plane_bound(bvh.bounds), Robust);
     std::optional<TriangleTest> tri_ray;
     detail::traverse_from<Q>(bvh, {0, 0, ray.tmin}, box_ray, ray.tmin, hit, counter,
-                                     [&](const detail::StackEntry& leaf) {
-                                         if (!tri_ray) tri_ray.emplace(ray);
-                                         return detail::intersect_leaf(bvh, leaf, *tri_ray, ray.tmin, hit, counter);
-                                     });
+                             [&](const detail::StackEntry& leaf) {
+                                 if (!tri_ray) tri_ray.emplace(ray);  // set up at the first leaf: many rays reach none
+                                 return detail::intersect_leaf(bvh, leaf, *tri_ray, ray.tmin, hit, counter);
+                             });
     return hit.found();
 }
 
