@@ -29,11 +29,10 @@ bool enter_object(const WideBvh<N>& pool, const TopLevelRef& entry, const SlabRa
 
 // The top-level leaf `leaf`, a run of instance entries: each entered with the ray in its instance's space. Out
 // of line, so the world-ray loop, all that scenes of identity placements run, stays small (crytek-sponza frames
-// about 2% faster; within noise on zoo-64).
-template <Query Q, bool Robust, class TriangleTest, int N, class Counter>
+// about 2% faster; within noise on zoo-64). world_tri() gives the world ray's triangle test.
+template <Query Q, bool Robust, class TriangleTest, int N, class Counter, class WorldTri>
 [[gnu::noinline]] bool enter_instances(const TwoLevelBvh<N>& bvh, const StackEntry& leaf, const Ray& ray,
-                                       const SlabRay<N>& world_box, const TriangleTest& world_tri, Hit& hit,
-                                       Counter& counter) {
+                                       const SlabRay<N>& world_box, WorldTri&& world_tri, Hit& hit, Counter& counter) {
     bool found = false;
     const uint32_t end = leaf.child + (leaf.count & ~TwoLevelBvh<N>::kInstanceEntries);
     for (uint32_t i = leaf.child; i < end; ++i) {
@@ -41,8 +40,7 @@ template <Query Q, bool Robust, class TriangleTest, int N, class Counter>
         const PlacedObject& instance = bvh.instances[entry.instance];
         bool here;
         if (instance.identity) {
-            here = enter_object<Q>(bvh.pool, entry, world_box, [&]() -> const TriangleTest& { return world_tri; },
-                                   ray.tmin, hit, counter);
+            here = enter_object<Q>(bvh.pool, entry, world_box, world_tri, ray.tmin, hit, counter);
         } else {
             // Direction is not renormalised, so distances along the ray stay world distances. The triangle test's
             // setup waits for a leaf: most entries miss every box below them (zoo-64: of 1.9 entries a ray, 0.84
@@ -71,12 +69,16 @@ template <Query Q, bool Robust = true, class TriangleTest = WatertightRay, int N
     hit.t = ray.tmax;
     if (bvh.brefs == 0) return false;
     const detail::SlabRay<N> world_box(ray, plane_bound(bvh.bounds), Robust);
-    const TriangleTest world_tri(ray);
+    std::optional<TriangleTest> world_test;  // set up at the first leaf the world ray reaches, as in the flat kernel
+    const auto world_tri = [&]() -> const TriangleTest& {
+        if (!world_test) world_test.emplace(ray);
+        return *world_test;
+    };
     const detail::StackEntry root{bvh.root, 0, ray.tmin};
     detail::traverse_from<Q>(bvh.pool, root, world_box, ray.tmin, hit, counter, [&](const detail::StackEntry& leaf) {
         if (leaf.count & TwoLevelBvh<N>::kInstanceEntries)
-            return detail::enter_instances<Q, Robust>(bvh, leaf, ray, world_box, world_tri, hit, counter);
-        return detail::intersect_leaf(bvh.pool, leaf, world_tri, ray.tmin, hit, counter);  // a directly linked leaf
+            return detail::enter_instances<Q, Robust, TriangleTest>(bvh, leaf, ray, world_box, world_tri, hit, counter);
+        return detail::intersect_leaf(bvh.pool, leaf, world_tri(), ray.tmin, hit, counter);  // a directly linked leaf
     });
     return hit.found();
 }
