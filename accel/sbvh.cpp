@@ -190,7 +190,9 @@ private:
     }
 
     // Stich et al.: spatial bins over the node's bounds (its largest axis, see kSpatialBins); each reference is
-    // clipped into every bin it spans and counted as entering its first bin and leaving its last.
+    // clipped into every bin it spans and counted as entering its first bin and leaving its last. The bins only
+    // price splits, so they clip with float crossings (Clipping::Estimate): exact clipping took 28% of a
+    // conference build, and the trees came out the same (split_spatially clips references exactly).
     struct SpatialBins {
         std::array<Bin, kSpatialBins> bins;
         std::array<uint32_t, kSpatialBins> entries{}, exits{};
@@ -211,7 +213,8 @@ private:
                 const uint32_t first = map.bin(ref.lower[axis]), last = map.bin(ref.upper[axis]);
                 BBox piece = ref.bounds();
                 for (uint32_t k = first; k < last; ++k) {
-                    const auto [left, right] = split_triangle_bounds(triangles_[ref.prim], piece, axis, map.plane(k + 1));
+                    const auto [left, right] =
+                        split_triangle_bounds<Clipping::Estimate>(triangles_[ref.prim], piece, axis, map.plane(k + 1));
                     s.bins[k].bounds.extend(left);
                     piece = right;
                 }

@@ -115,3 +115,32 @@ TEST_CASE("a split of a clipped piece stays inside that piece", "[clipping]") {
     CHECK(nothing.empty());
     CHECK(all.lower.y == 0.0f);
 }
+
+// SBVH's spatial binning prices splits with float crossings (Clipping::Estimate); its boxes must stay within a few
+// float spacings of the exact ones, at every scale and offset, or the bins would price splits that do not exist.
+TEST_CASE("split bounds estimated for binning stay within a few ulps of the exact ones", "[clipping]") {
+    std::mt19937 rng(13);
+    const auto spacing = [](const Triangle& t) {
+        const Vec3 m = glm::max(glm::abs(t.v0), glm::max(glm::abs(t.v1), glm::abs(t.v2)));
+        const float largest = std::max(m.x, std::max(m.y, m.z));
+        return std::nextafter(largest, INFINITY) - largest;
+    };
+    for (const auto& [scale, offset] : {std::pair{1.0, 0.0}, {1e-30, 0.0}, {1e30, 0.0}, {1e-3, 1e7}, {1.0, -3e5}}) {
+        for (int i = 0; i < 2000; ++i) {
+            const Triangle t = random_triangle(rng, scale, offset);
+            const int axis = i % 3;
+            const float position = random_plane(t, axis, rng);
+            const BBox whole = BBox::of(t);
+            const auto exact = split_triangle_bounds(t, whole, axis, position);
+            const auto estimate = split_triangle_bounds<Clipping::Estimate>(t, whole, axis, position);
+            const float tolerance = 8.0f * spacing(t);
+            INFO("scale " << scale << " offset " << offset << " axis " << axis << " at " << position);
+            for (const auto& [e, x] : {std::pair{estimate.first, exact.first}, {estimate.second, exact.second}}) {
+                REQUIRE(e.empty() == x.empty());
+                if (x.empty()) continue;
+                CHECK(glm::all(glm::lessThanEqual(glm::abs(e.lower - x.lower), Vec3(tolerance))));
+                CHECK(glm::all(glm::lessThanEqual(glm::abs(e.upper - x.upper), Vec3(tolerance))));
+            }
+        }
+    }
+}
