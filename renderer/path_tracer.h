@@ -33,7 +33,7 @@ struct ShadingScene {
 };
 
 template <class Tracer>
-Vec3 trace_path(const Tracer& tracer, const ShadingScene& scene, Ray ray, Rng& rng, uint64_t& rays) {
+Vec3 trace_path(const Tracer& tracer, const ShadingScene& scene, Ray& ray, Rng& rng, uint64_t& rays) {
     Vec3 throughput(1.0f), radiance(0.0f);
     for (int depth = 0; depth <= scene.settings.max_bounces; ++depth) {
         Hit hit;
@@ -50,7 +50,13 @@ Vec3 trace_path(const Tracer& tracer, const ShadingScene& scene, Ray ray, Rng& r
         throughput *= scene.albedo(hit.prim);
         if (depth == scene.settings.max_bounces) break;
         const Vec3 p = tri.v0 + hit.u * (tri.v1 - tri.v0) + hit.v * (tri.v2 - tri.v0);
-        ray = Ray{offset_ray_origin(p, n, triangle_point_error(tri)), cosine_direction(n, rng.next_float(), rng.next_float())};
+        // Written member by member, not as ray = Ray{...}: GCC built that temporary with small stores and copied it
+        // with one 32-byte load, which waited for them (a failed store forward, 13% of this loop's samples with
+        // canopy's kernels, which read the ray from memory; Embree's copy reads the members one by one).
+        ray.org = offset_ray_origin(p, n, triangle_point_error(tri));
+        ray.dir = cosine_direction(n, rng.next_float(), rng.next_float());
+        ray.tmin = 0.0f;
+        ray.tmax = std::numeric_limits<float>::infinity();
     }
     return radiance;
 }
@@ -73,7 +79,8 @@ uint64_t render_frame(const Tracer& tracer, const ShadingScene& scene, const Pin
             for (int x = x0; x < std::min(x0 + kTile, w); ++x) {
                 Rng rng(uint64_t(y) * uint64_t(w) + uint64_t(x), frame);
                 const float u = rng.next_float(), v = rng.next_float();
-                accumulated.add(x, y, trace_path(tracer, scene, camera.generate(x, y, u, v), rng, rays));
+                Ray ray = camera.generate(x, y, u, v);  // built in place: trace_path takes it by reference
+                accumulated.add(x, y, trace_path(tracer, scene, ray, rng, rays));
             }
         }
         tile_rays[size_t(tile)] = rays;

@@ -45,7 +45,8 @@ std::vector<Ray> diffuse_rays(const Accelerator& reference, const FlatScene& fla
             Rng rng(uint64_t(y) * uint64_t(w) + uint64_t(x), 0);
             uint64_t count = 0;
             const float u = rng.next_float(), v = rng.next_float();
-            trace_path(tracer, shading, camera.generate(x, y, u, v), rng, count);
+            Ray ray = camera.generate(x, y, u, v);
+            trace_path(tracer, shading, ray, rng, count);
         }
     return rays;
 }
