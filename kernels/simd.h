@@ -1,8 +1,8 @@
 #pragma once
 // Thin SIMD float vectors for the wide kernels: Simd<4> on SSE, Simd<8> on AVX. max/min keep their second
-// operand where the first is NaN (the x86 semantics), which the slab test relies on: pass the running value
-// second and a NaN from 0 * inf never replaces it, exactly as in the scalar test. Comparisons are ordered
-// (false on NaN) except cmpneq, which is true on NaN as in IEEE 754.
+// operand where the first is NaN (the x86 semantics). Comparisons are ordered (false on NaN) except cmpneq, which
+// is true on NaN as in IEEE 754. max_bits, min_bits and le_mask_bits compare floats by their bits as signed
+// integers, which the slab test uses (see intersect_children in traverse.h).
 #include <immintrin.h>
 
 #include "kernels/ray.h"
@@ -56,6 +56,9 @@ struct Simd<4> {
     static F neq(F a, F b) { return _mm_cmpneq_ps(a, b); }
     static uint32_t mask(F a) { return uint32_t(_mm_movemask_ps(a)); }
     static uint32_t le_mask(F a, F b) { return mask(le(a, b)); }
+    static F max_bits(F a, F b) { return _mm_castsi128_ps(_mm_max_epi32(_mm_castps_si128(a), _mm_castps_si128(b))); }
+    static F min_bits(F a, F b) { return _mm_castsi128_ps(_mm_min_epi32(_mm_castps_si128(a), _mm_castps_si128(b))); }
+    static uint32_t le_mask_bits(F a, F b) { return ~mask(_mm_castsi128_ps(_mm_cmpgt_epi32(_mm_castps_si128(a), _mm_castps_si128(b)))) & 0xfu; }
     static void store(float* p, F a) { _mm_storeu_ps(p, a); }
 };
 
@@ -87,6 +90,9 @@ struct Simd<8> {
     static F neq(F a, F b) { return _mm256_cmp_ps(a, b, _CMP_NEQ_UQ); }
     static uint32_t mask(F a) { return uint32_t(_mm256_movemask_ps(a)); }
     static uint32_t le_mask(F a, F b) { return mask(le(a, b)); }
+    static F max_bits(F a, F b) { return _mm256_castsi256_ps(_mm256_max_epi32(_mm256_castps_si256(a), _mm256_castps_si256(b))); }
+    static F min_bits(F a, F b) { return _mm256_castsi256_ps(_mm256_min_epi32(_mm256_castps_si256(a), _mm256_castps_si256(b))); }
+    static uint32_t le_mask_bits(F a, F b) { return ~mask(_mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_castps_si256(a), _mm256_castps_si256(b)))) & 0xffu; }
     static void store(float* p, F a) { _mm256_storeu_ps(p, a); }
 };
 #endif

@@ -31,7 +31,7 @@ bool enter_object(const WideBvh<N>& pool, const TopLevelRef& entry, const SlabRa
 // of line, so the world-ray loop, all that scenes of identity placements run, stays small (crytek-sponza frames
 // about 2% faster; within noise on zoo-64). world_tri() gives the world ray's triangle test.
 template <Query Q, bool Robust, class TriangleTest, int N, class Counter, class WorldTri>
-[[gnu::noinline]] bool enter_instances(const TwoLevelBvh<N>& bvh, const StackEntry& leaf, const Ray& ray,
+[[gnu::noinline]] bool enter_instances(const TwoLevelBvh<N>& bvh, const StackEntry& leaf, const Ray& ray, float tmin,
                                        const SlabRay<N>& world_box, WorldTri&& world_tri, Hit& hit, Counter& counter) {
     bool found = false;
     const uint32_t end = leaf.child + (leaf.count & ~TwoLevelBvh<N>::kInstanceEntries);
@@ -40,18 +40,18 @@ template <Query Q, bool Robust, class TriangleTest, int N, class Counter, class 
         const PlacedObject& instance = bvh.instances[entry.instance];
         bool here;
         if (instance.identity) {
-            here = enter_object<Q>(bvh.pool, entry, world_box, world_tri, ray.tmin, hit, counter);
+            here = enter_object<Q>(bvh.pool, entry, world_box, world_tri, tmin, hit, counter);
         } else {
             // Direction is not renormalised, so distances along the ray stay world distances. The triangle test's
             // setup waits for a leaf: most entries miss every box below them (zoo-64: of 1.9 entries a ray, 0.84
             // reach a leaf; frames 3% faster).
-            const Ray local{instance.point(ray.org), instance.vector(ray.dir), ray.tmin, hit.t};
+            const Ray local{instance.point(ray.org), instance.vector(ray.dir), tmin, hit.t};
             std::optional<TriangleTest> local_tri;
             const SlabRay<N> local_box(local, plane_bound(bvh.objects[instance.object].bounds), Robust);
             here = enter_object<Q>(bvh.pool, entry, local_box, [&]() -> const TriangleTest& {
                 if (!local_tri) local_tri.emplace(local);
                 return *local_tri;
-            }, ray.tmin, hit, counter);
+            }, tmin, hit, counter);
         }
         if (here) hit.prim += instance.prim_offset;
         found |= here;
@@ -74,11 +74,12 @@ template <Query Q, bool Robust = true, class TriangleTest = WatertightRay, int N
         if (!world_test) world_test.emplace(ray);
         return *world_test;
     };
-    const detail::StackEntry root{bvh.root, 0, ray.tmin};
-    detail::traverse_from<Q>(bvh.pool, root, world_box, ray.tmin, hit, counter, [&](const detail::StackEntry& leaf) {
+    const float tmin = kernel_tmin(ray);
+    const detail::StackEntry root{bvh.root, 0, tmin};
+    detail::traverse_from<Q>(bvh.pool, root, world_box, tmin, hit, counter, [&](const detail::StackEntry& leaf) {
         if (leaf.count & TwoLevelBvh<N>::kInstanceEntries)
-            return detail::enter_instances<Q, Robust, TriangleTest>(bvh, leaf, ray, world_box, world_tri, hit, counter);
-        return detail::intersect_leaf(bvh.pool, leaf, world_tri(), ray.tmin, hit, counter);  // a directly linked leaf
+            return detail::enter_instances<Q, Robust, TriangleTest>(bvh, leaf, ray, tmin, world_box, world_tri, hit, counter);
+        return detail::intersect_leaf(bvh.pool, leaf, world_tri(), tmin, hit, counter);  // a directly linked leaf
     });
     return hit.found();
 }

@@ -108,6 +108,20 @@ TEST_CASE("zero and negative-zero direction components agree with brute force", 
     check_against_oracle(flat.triangles, rays, "box, zero components");
 }
 
+// A NaN direction component disables its axis in the node test (SlabRay): no crash, no hit, in any kernel.
+TEST_CASE("rays with NaN direction components hit nothing and never crash", "[extreme]") {
+    const FlatScene flat = flatten(load_scene("gen:box?tris=2000&seed=15"));
+    const BuiltScene built = build_with("binned", flat.triangles);
+    const float nan = std::numeric_limits<float>::quiet_NaN();
+    const Vec3 inside = BBox::of(flat.triangles[0]).center();
+    for (const KernelUnderTest& kernel : kernels_of(built))
+        for (const Vec3& dir : {Vec3(nan, 0, 1), Vec3(nan, nan, nan), Vec3(-nan, 1, 0), Vec3(0, nan, -nan)}) {
+            INFO(kernel.name << " direction " << dir.x << " " << dir.y << " " << dir.z);
+            CHECK(!kernel.closest(Ray{inside, dir}).found());
+            CHECK(!kernel.any(Ray{inside, dir}));
+        }
+}
+
 TEST_CASE("degenerate triangles are built and traced without harm", "[extreme]") {
     const FlatScene flat = flatten(load_scene("gen:surface?tris=3000&seed=14"));
     std::vector<Triangle> tris = flat.triangles;
