@@ -56,9 +56,10 @@ struct Simd<4> {
     static F neq(F a, F b) { return _mm_cmpneq_ps(a, b); }
     static uint32_t mask(F a) { return uint32_t(_mm_movemask_ps(a)); }
     static uint32_t le_mask(F a, F b) { return mask(le(a, b)); }
-    static F max_bits(F a, F b) { return _mm_castsi128_ps(_mm_max_epi32(_mm_castps_si128(a), _mm_castps_si128(b))); }
-    static F min_bits(F a, F b) { return _mm_castsi128_ps(_mm_min_epi32(_mm_castps_si128(a), _mm_castps_si128(b))); }
-    static uint32_t le_mask_bits(F a, F b) { return ~mask(_mm_castsi128_ps(_mm_cmpgt_epi32(_mm_castps_si128(a), _mm_castps_si128(b)))) & 0xfu; }
+    static __m128i bits(F a) { return _mm_castps_si128(a); }
+    static F max_bits(F a, F b) { return _mm_castsi128_ps(_mm_max_epi32(bits(a), bits(b))); }
+    static F min_bits(F a, F b) { return _mm_castsi128_ps(_mm_min_epi32(bits(a), bits(b))); }
+    static uint32_t le_mask_bits(F a, F b) { return ~mask(_mm_castsi128_ps(_mm_cmpgt_epi32(bits(a), bits(b)))) & 0xfu; }
     static void store(float* p, F a) { _mm_storeu_ps(p, a); }
 };
 
@@ -90,9 +91,12 @@ struct Simd<8> {
     static F neq(F a, F b) { return _mm256_cmp_ps(a, b, _CMP_NEQ_UQ); }
     static uint32_t mask(F a) { return uint32_t(_mm256_movemask_ps(a)); }
     static uint32_t le_mask(F a, F b) { return mask(le(a, b)); }
-    static F max_bits(F a, F b) { return _mm256_castsi256_ps(_mm256_max_epi32(_mm256_castps_si256(a), _mm256_castps_si256(b))); }
-    static F min_bits(F a, F b) { return _mm256_castsi256_ps(_mm256_min_epi32(_mm256_castps_si256(a), _mm256_castps_si256(b))); }
-    static uint32_t le_mask_bits(F a, F b) { return ~mask(_mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_castps_si256(a), _mm256_castps_si256(b)))) & 0xffu; }
+    static __m256i bits(F a) { return _mm256_castps_si256(a); }
+    static F max_bits(F a, F b) { return _mm256_castsi256_ps(_mm256_max_epi32(bits(a), bits(b))); }
+    static F min_bits(F a, F b) { return _mm256_castsi256_ps(_mm256_min_epi32(bits(a), bits(b))); }
+    static uint32_t le_mask_bits(F a, F b) {
+        return ~mask(_mm256_castsi256_ps(_mm256_cmpgt_epi32(bits(a), bits(b)))) & 0xffu;
+    }
     static void store(float* p, F a) { _mm256_storeu_ps(p, a); }
 };
 #endif

@@ -78,7 +78,8 @@ template <Query Q, bool Robust = true, class TriangleTest = WatertightRay, int N
     const detail::StackEntry root{bvh.root, 0, tmin};
     detail::traverse_from<Q>(bvh.pool, root, world_box, tmin, hit, counter, [&](const detail::StackEntry& leaf) {
         if (leaf.count & TwoLevelBvh<N>::kInstanceEntries)
-            return detail::enter_instances<Q, Robust, TriangleTest>(bvh, leaf, ray, tmin, world_box, world_tri, hit, counter);
+            return detail::enter_instances<Q, Robust, TriangleTest>(bvh, leaf, ray, tmin, world_box, world_tri, hit,
+                                                                    counter);
         return detail::intersect_leaf(bvh.pool, leaf, world_tri(), tmin, hit, counter);  // a directly linked leaf
     });
     return hit.found();

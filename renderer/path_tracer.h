@@ -32,6 +32,8 @@ struct ShadingScene {
     }
 };
 
+// One path from its first ray; `ray` then holds each bounce's ray in turn. By reference, so the caller's ray is the
+// one traced, not a copy (see the bounce below).
 template <class Tracer>
 Vec3 trace_path(const Tracer& tracer, const ShadingScene& scene, Ray& ray, Rng& rng, uint64_t& rays) {
     Vec3 throughput(1.0f), radiance(0.0f);

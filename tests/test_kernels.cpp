@@ -158,7 +158,8 @@ TEST_CASE("a negative, negative-zero or NaN tmin counts as 0 in every kernel", "
     const std::vector<Ray> rays = random_rays(flat.triangles, 2000, 43);
     size_t hits = 0;
     for (const KernelUnderTest& kernel : kernels_of(built))
-        for (const float tmin : {-1.0f, -0.0f, -std::numeric_limits<float>::infinity(), std::numeric_limits<float>::quiet_NaN()})
+        for (const float tmin :
+             {-1.0f, -0.0f, -std::numeric_limits<float>::infinity(), std::numeric_limits<float>::quiet_NaN()})
             for (Ray ray : rays) {
                 const Hit from_zero = kernel.closest(ray);
                 hits += from_zero.found();
