@@ -55,26 +55,29 @@ public:
 
     // The slot, other than `self`, whose cluster is nearest to `box`. Of equally near ones, the first in the
     // search order: that order depends only on the tree, so the answer does not depend on threads, and a
-    // cluster inside a big one's box ends the search as soon as it is found.
+    // cluster inside a big one's box ends the search as soon as it is found. Where box areas overflow float
+    // (scenes beyond about 1e19), distances are infinite: the first live slot found then stands, so there is
+    // always an answer while another cluster lives.
     std::pair<uint32_t, float> nearest(const BBox& box, uint32_t self) const {
         uint32_t best = kNone;
         float best_distance = std::numeric_limits<float>::infinity();
+        const auto nearer = [&](float d) { return best == kNone || d < best_distance; };
         // Neighbours in Morton order are usually near: starting from the best of them prunes most of the tree.
         for (uint32_t slot = self > kSeeds ? self - kSeeds : 0; slot < std::min(self + kSeeds + 1, size_); ++slot) {
             if (slot == self || boxes_[slot].empty()) continue;
             const float d = distance(box, boxes_[slot]);
-            if (d < best_distance) best = slot, best_distance = d;
+            if (nearer(d)) best = slot, best_distance = d;
         }
         uint32_t stack[64];
         int top = 0;
         stack[top++] = 1;
         while (top > 0) {
             const uint32_t node = stack[--top];
-            if (centres_[node].empty() || distance_bound(box, centres_[node]) >= best_distance) continue;
+            if (centres_[node].empty() || (best != kNone && distance_bound(box, centres_[node]) >= best_distance)) continue;
             if (node >= size_) {
                 const uint32_t slot = node - size_;
                 const float d = distance(box, boxes_[slot]);
-                if (slot != self && d < best_distance) best = slot, best_distance = d;
+                if (slot != self && nearer(d)) best = slot, best_distance = d;
                 continue;
             }
             // Nearer child on top, so it is searched first and tightens the bound for the other.

@@ -83,7 +83,8 @@ private:
     }
 
     // The cluster within `radius_` positions whose merge with cluster i has the smallest area; ties go to the
-    // lower position, so the closest pair overall is always mutual and every step merges at least once.
+    // lower position, so the closest pair overall is always mutual and every step merges at least once. That
+    // holds where areas overflow float too (scenes beyond about 1e19): every area is then a tie.
     uint32_t nearest_neighbour(uint32_t i) const {
         const uint32_t m = uint32_t(clusters_.size());
         const uint32_t begin = i > radius_ ? i - radius_ : 0, end = std::min(m, i + radius_ + 1);
@@ -92,7 +93,7 @@ private:
         for (uint32_t j = begin; j < end; ++j) {
             if (j == i) continue;
             const float area = merge(boxes_[i], boxes_[j]).half_area();
-            if (area < best_area) best = j, best_area = area;
+            if (best == i || area < best_area) best = j, best_area = area;
         }
         return best;
     }

@@ -112,9 +112,9 @@ private:
                 return nodes_.set_leaf(node, bounds, begin, n);
         } else if (n <= max_leaf_) {
             return nodes_.set_leaf(node, bounds, begin, n);
-        } else {
-            split = {bounds.largest_axis(), begin + n / 2, 0.0f};  // too deep: cut at the median
         }
+        // Too deep, or no finite cost (box areas that overflow float, scenes beyond about 1e19): cut at the median.
+        if (split.axis < 0) split = {bounds.largest_axis(), begin + n / 2, 0.0f};
         partition(begin, end, split);
         const auto [left_descendants, right_descendants] =
             nodes_.set_inner(node, bounds, descendants, split.position - begin);
