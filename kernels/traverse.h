@@ -136,11 +136,11 @@ struct SlabLanes {
 // A slab distance's bits as a signed integer. Slab distances are compared by these (Embree's trick): integer max
 // and min take one cycle where the float ones take four, and they sit on every node's critical path (load, slab
 // distances, interval, mask, child, next node): crytek-sponza bvh8 frames 1.17x to 1.18x Embree MEDIUM's
-// before, 1.12x to 1.13x after. Integer order is float order for +0 up to +inf; a negative float (-0 too) reads as a negative
-// integer, below all of those. The near distances meet tmin >= +0 (kernel_tmin), so their maximum is the float
-// maximum; the far ones meet tmax, and their minimum is the float minimum unless one of them is negative, when it
-// reads negative and the box, behind the origin, is culled. The one NaN a SlabRay leaves, an empty slot's, is
-// x86's default NaN, negative: as a far distance it culls that slot.
+// before, 1.12x to 1.13x after. Integer order is float order for +0 up to +inf; a negative float (-0 too) reads
+// as a negative integer, below all of those. The near distances meet tmin >= +0 (kernel_tmin), so their maximum
+// is the float maximum; the far ones meet tmax, and their minimum is the float minimum unless one of them is
+// negative, when it reads negative and the box, behind the origin, is culled. The one NaN a SlabRay leaves, an
+// empty slot's, is x86's default NaN, negative: as a far distance it culls that slot.
 [[gnu::always_inline]] inline int32_t distance_bits(float t) { return std::bit_cast<int32_t>(t); }
 
 // Slab test of every child box against [tmin, tmax]; returns a bit mask of the children hit and their entry
