@@ -28,13 +28,15 @@ class WatertightRay {
 public:
     // Without branches: the axes come from a comparison mask through tables, and coordinates are read by index
     // from memory (glm's operator[] is a switch), since the choice follows the ray's direction, which no branch
-    // predictor can guess.
+    // predictor can guess. The tables are static (a local constexpr array was copied to the stack on every call)
+    // and |dir| is three ANDs (glm::abs compiled to compare-and-blend): crytek-sponza bvh8 frames 1.13x Embree
+    // MEDIUM's before, 1.11x after (two runs each; 1 to 3% on sibenik, conference and stanford-bunny).
     [[gnu::always_inline]] explicit WatertightRay(const Ray& ray) : org_(ray.org) {
-        const Vec3 a = glm::abs(ray.dir);
+        const Vec3 a(std::abs(ray.dir.x), std::abs(ray.dir.y), std::abs(ray.dir.z));
         // sec. 3: the largest |dir| axis, as a >= chain would choose it: bits x>=y, x>=z, y>=z to the axis
-        constexpr int kLargest[8] = {2, 2, 2, 0, 1, 2, 1, 0};
+        static constexpr int kLargest[8] = {2, 2, 2, 0, 1, 2, 1, 0};
         kz_ = kLargest[int(a.x >= a.y) | int(a.x >= a.z) << 1 | int(a.y >= a.z) << 2];
-        constexpr int kNext[3] = {1, 2, 0};
+        static constexpr int kNext[3] = {1, 2, 0};
         kx_ = kNext[kz_];
         ky_ = kNext[kx_];
         const float* dir = &ray.dir.x;
