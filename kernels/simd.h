@@ -102,22 +102,24 @@ struct Simd<8> {
 #endif
 
 // Records in `hit` the nearest of the lanes in `lanes` (a bit mask of valid hits) and returns its lane, or -1
-// when there are none. Ties go to the later lane, as the scalar kernel's loop over a leaf's triangles does.
+// when there are none; its barycentrics are u / den and v / den, divided for that lane only. Ties go to the
+// later lane, as the scalar kernel's loop over a leaf's triangles does.
 template <class S>
 [[gnu::always_inline]] inline int record_nearest(uint32_t lanes, typename S::F t, typename S::F u, typename S::F v,
-                                                  const uint32_t* prim, Hit& hit) {
+                                                  typename S::F den, const uint32_t* prim, Hit& hit) {
     if (!lanes) return -1;
     constexpr int W = sizeof(typename S::F) / sizeof(float);
-    alignas(32) float ts[W], us[W], vs[W];
+    alignas(32) float ts[W], us[W], vs[W], dens[W];
     S::store(ts, t);
     S::store(us, u);
     S::store(vs, v);
+    S::store(dens, den);
     int best = std::countr_zero(lanes);
     for (lanes &= lanes - 1; lanes; lanes &= lanes - 1) {
         const int lane = std::countr_zero(lanes);
         if (ts[lane] <= ts[best]) best = lane;
     }
-    hit = {ts[best], us[best], vs[best], prim[best]};
+    hit = {ts[best], us[best] / dens[best], vs[best] / dens[best], prim[best]};
     return best;
 }
 

@@ -65,18 +65,11 @@ public:
         if ((u < 0.0f || v < 0.0f || w < 0.0f) && (u > 0.0f || v > 0.0f || w > 0.0f)) return false;
         const float det = u + v + w;
         if (det == 0.0f) return false;
-        const float az = sz_ * a[kz_], bz = sz_ * b[kz_], cz = sz_ * c[kz_];
-        const float t_scaled = u * az + v * bz + w * cz;
-        // Compare t_scaled / det against the interval without dividing (sign of det folded in).
-        const float sign = std::copysign(1.0f, det);
-        const float abs_det = std::abs(det);
-        const float ts = t_scaled * sign;
-        if (ts <= tmin * abs_det || ts > hit.t * abs_det) return false;
-        const float inv_det = 1.0f / det;
-        const float t = t_scaled * inv_det;
-        // Rounding of the division; an overflow to inf (denormal directions) is no hit.
+        // t = sz (u a_z + v b_z + w c_z) / det (sec. 3, eq. 7, with the shear's z scale applied once, after the
+        // interpolation); an overflow to inf (denormal directions, or det underflowing) is no hit.
+        const float t = std::fma(u, a[kz_], std::fma(v, b[kz_], w * c[kz_])) * (sz_ / det);
         if (!(t > tmin && t <= hit.t && t < std::numeric_limits<float>::infinity())) return false;
-        hit = {t, v * inv_det, w * inv_det, prim};
+        hit = {t, v / det, w / det, prim};
         return true;
     }
 
@@ -96,28 +89,23 @@ public:
             const F pz = S::sub(S::load(block.v[v][kz_]), org[2]);
             x[v] = S::sub(px, S::mul(sx, pz));
             y[v] = S::sub(py, S::mul(sy, pz));
-            z[v] = S::mul(sz, pz);
+            z[v] = pz;
         }
         const F u = difference_of_products_simd<S>(x[2], y[1], y[2], x[1]);
         const F v = difference_of_products_simd<S>(x[0], y[2], y[0], x[2]);
         const F w = difference_of_products_simd<S>(x[1], y[0], y[1], x[0]);
         const F zero = S::zero();
-        const F any_negative = S::bit_or(S::bit_or(S::lt(u, zero), S::lt(v, zero)), S::lt(w, zero));
-        const F any_positive = S::bit_or(S::bit_or(S::gt(u, zero), S::gt(v, zero)), S::gt(w, zero));
+        // A negative and a positive edge function: the smallest is negative and the largest positive (where one
+        // is NaN the lane may decide otherwise, but then det is NaN and the interval tests below fail).
+        const F any_negative = S::lt(S::min(S::min(u, v), w), zero);
+        const F any_positive = S::gt(S::max(S::max(u, v), w), zero);
         const F det = S::add(S::add(u, v), w);
-        const F t_scaled = S::add(S::add(S::mul(u, z[0]), S::mul(v, z[1])), S::mul(w, z[2]));
-        const F sign_bit = S::bit_and(det, S::set1(-0.0f));
-        const F abs_det = S::and_not(S::set1(-0.0f), det);
-        const F ts = S::bit_xor(t_scaled, sign_bit);
+        const F t = S::mul(S::fmadd(u, z[0], S::fmadd(v, z[1], S::mul(w, z[2]))), S::div(sz, det));
         const F t_min = S::set1(tmin), t_max = S::set1(hit.t);
         F valid = S::and_not(S::bit_and(any_negative, any_positive), S::neq(det, zero));
-        valid = S::bit_and(valid, S::gt(ts, S::mul(t_min, abs_det)));
-        valid = S::bit_and(valid, S::le(ts, S::mul(t_max, abs_det)));
-        const F inv_det = S::div(S::set1(1.0f), det);
-        const F t = S::mul(t_scaled, inv_det);
         valid = S::bit_and(valid, S::bit_and(S::gt(t, t_min), S::le(t, t_max)));
         valid = S::bit_and(valid, S::lt(t, S::set1(std::numeric_limits<float>::infinity())));
-        return simd::record_nearest<S>(S::mask(valid), t, S::mul(v, inv_det), S::mul(w, inv_det), block.prim, hit);
+        return simd::record_nearest<S>(S::mask(valid), t, v, w, det, block.prim, hit);
     }
 #endif
 
