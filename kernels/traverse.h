@@ -195,6 +195,15 @@ template <int N, class Leaf>
     for (size_t line = 0; line < sizeof(WideNode<N>); line += 64) _mm_prefetch(p + line, _MM_HINT_T0);
 }
 
+// Starts the fetch of a node's child references with that of its boxes, where they lie on a cache line of their
+// own (BVH8: boxes on lines 0 to 2, references on line 3). Otherwise that line is requested only once the slab
+// test has chosen a child, a second miss on every node's critical path: crytek-sponza bvh8 frames 1.12x Embree
+// MEDIUM's before, 1.09x after; conference 1.087x, 1.062x; sibenik equal (means of 3 or 4 alternating runs).
+template <int N>
+[[gnu::always_inline]] inline void prefetch_child_line(const WideNode<N>& node) {
+    if constexpr (sizeof(node.planes) % 64 == 0) _mm_prefetch(reinterpret_cast<const char*>(node.child), _MM_HINT_T0);
+}
+
 // Intersects a leaf's triangles; true when a hit was recorded.
 template <int N, class TriangleTest, class Counter>
 [[gnu::always_inline]] inline bool intersect_leaf(const WideBvh<N>& bvh, const StackEntry& leaf,
@@ -242,6 +251,7 @@ template <Query Q, int N, class Tree, class Counter, class LeafFn>
         if (current.count == 0) {
             counter.inner();
             const WideNode<N>& node = nodes[current.child];
+            prefetch_child_line(node);
             std::array<float, N> tnear;
             uint32_t mask = intersect_children<N>(node, ray, t_min, tfar, tnear);
             if (mask) {
