@@ -25,6 +25,9 @@ struct BBox {
         return {glm::min(t.v0, glm::min(t.v1, t.v2)), glm::max(t.v0, glm::max(t.v1, t.v2))};
     }
     bool empty() const { return lower.x > upper.x || lower.y > upper.y || lower.z > upper.z; }
+    bool contains(const Vec3& p) const {  // false for a NaN coordinate
+        return p.x >= lower.x && p.y >= lower.y && p.z >= lower.z && p.x <= upper.x && p.y <= upper.y && p.z <= upper.z;
+    }
     void extend(const BBox& b) { lower = glm::min(lower, b.lower); upper = glm::max(upper, b.upper); }
     void extend(const Vec3& p) { lower = glm::min(lower, p); upper = glm::max(upper, p); }
     Vec3 extent() const { return upper - lower; }

@@ -172,3 +172,14 @@ TEST_CASE("a negative, negative-zero or NaN tmin counts as 0 in every kernel", "
             }
     CHECK(hits > 1000);
 }
+
+// The kernels set the triangle test up at once for rays from inside the scene's box (BBox::contains) and at the
+// first leaf for the others; the oracle tests above cover both kinds. The box test is inclusive and false on NaN.
+TEST_CASE("BBox::contains is inclusive and false for NaN", "[kernels]") {
+    const BBox box{{-1, -2, -3}, {1, 2, 3}};
+    CHECK(box.contains({0, 0, 0}));
+    CHECK(box.contains({-1, 2, 3}));
+    CHECK_FALSE(box.contains({0, 2.5f, 0}));
+    CHECK_FALSE(box.contains({0, 0, std::numeric_limits<float>::quiet_NaN()}));
+    CHECK_FALSE(BBox{}.contains({0, 0, 0}));
+}
