@@ -54,10 +54,13 @@ public:
     bool intersect(const Vec3& p0, const Vec3& p1, const Vec3& p2, uint32_t prim, float tmin, Hit& hit) const {
         const Vec3 a_vec = p0 - org_, b_vec = p1 - org_, c_vec = p2 - org_;
         const float *a = &a_vec.x, *b = &b_vec.x, *c = &c_vec.x;
-        // Sheared 2D coordinates (sec. 3, eq. 5)
-        const float ax = a[kx_] - sx_ * a[kz_], ay = a[ky_] - sy_ * a[kz_];
-        const float bx = b[kx_] - sx_ * b[kz_], by = b[ky_] - sy_ * b[kz_];
-        const float cx = c[kx_] - sx_ * c[kz_], cy = c[ky_] - sy_ * c[kz_];
+        // Sheared 2D coordinates (sec. 3, eq. 5), each one FMA: a shorter path to the edge functions than a product
+        // and a difference, and one rounding, not two. A shared vertex still shears to the same point in every
+        // triangle, which is all watertightness asks. crytek-sponza bvh8 frames 1.069x Embree MEDIUM's before,
+        // 1.045x after; sibenik 1.064x, 1.036x (means of 4 and 3 alternating runs).
+        const float ax = std::fma(-sx_, a[kz_], a[kx_]), ay = std::fma(-sy_, a[kz_], a[ky_]);
+        const float bx = std::fma(-sx_, b[kz_], b[kx_]), by = std::fma(-sy_, b[kz_], b[ky_]);
+        const float cx = std::fma(-sx_, c[kz_], c[kx_]), cy = std::fma(-sy_, c[kz_], c[ky_]);
         // Edge functions (eq. 6). Exactly signed, so the paper's double-precision retry on zero is not needed.
         const float u = difference_of_products(cx, by, cy, bx);
         const float v = difference_of_products(ax, cy, ay, cx);
@@ -82,13 +85,13 @@ public:
         using F = typename S::F;
         const F org[3] = {S::low(lanes_.org[0]), S::low(lanes_.org[1]), S::low(lanes_.org[2])};
         const F sx = S::low(lanes_.sx), sy = S::low(lanes_.sy), sz = S::low(lanes_.sz);
-        F x[3], y[3], z[3];  // the vertices relative to the origin: x and y sheared, z unscaled (sz goes to t)
+        F x[3], y[3], z[3];  // the vertices relative to the origin: x and y sheared as above, z unscaled (sz goes to t)
         for (int v = 0; v < 3; ++v) {
             const F px = S::sub(S::load(block.v[v][kx_]), org[0]);
             const F py = S::sub(S::load(block.v[v][ky_]), org[1]);
             const F pz = S::sub(S::load(block.v[v][kz_]), org[2]);
-            x[v] = S::sub(px, S::mul(sx, pz));
-            y[v] = S::sub(py, S::mul(sy, pz));
+            x[v] = S::fnmadd(sx, pz, px);
+            y[v] = S::fnmadd(sy, pz, py);
             z[v] = pz;
         }
         const F u = difference_of_products_simd<S>(x[2], y[1], y[2], x[1]);
