@@ -85,7 +85,7 @@ public:
         using F = typename S::F;
         const F org[3] = {S::low(lanes_.org[0]), S::low(lanes_.org[1]), S::low(lanes_.org[2])};
         const F sx = S::low(lanes_.sx), sy = S::low(lanes_.sy), sz = S::low(lanes_.sz);
-        F x[3], y[3], z[3];  // the vertices relative to the origin: x and y sheared as above, z unscaled (sz goes to t)
+        F x[3], y[3], z[3];  // the vertices relative to the origin: x and y sheared, z unscaled (sz goes to t)
         for (int v = 0; v < 3; ++v) {
             const F px = S::sub(S::load(block.v[v][kx_]), org[0]);
             const F py = S::sub(S::load(block.v[v][ky_]), org[1]);
