@@ -313,8 +313,8 @@ template <Query Q, bool Robust = true, class TriangleTest = WatertightRay, int N
     // The triangle test is set up at once for a ray that starts inside the scene's box, since such a ray nearly
     // always reaches a leaf and the setup then overlaps the first nodes' work; else at the first leaf, since many
     // rays from outside reach none. Set up always, crytek-sponza bvh8 frames took 1.042x Embree MEDIUM's against
-    // 1.076x set up at the first leaf, but stanford-bunny's 1.083x against 1.044x; this way 1.049x and 1.032x
-    // (means of four alternating runs).
+    // 1.076x set up at the first leaf, but stanford-bunny's 1.083x against 1.044x; gated this way, 1.049x against
+    // 1.083x and 1.032x against 1.038x (another batch; means of four alternating runs each).
     std::optional<TriangleTest> tri_ray;
     if (bvh.bounds.contains(ray.org)) tri_ray.emplace(ray);
     detail::traverse_from<Q>(bvh, {0, 0, tmin}, box_ray, tmin, hit, counter, [&](const detail::StackEntry& leaf) {
