@@ -65,7 +65,7 @@ public:
         valid = S::bit_and(valid, S::bit_and(S::ge(v, zero), S::le(S::add(u, v), S::set1(1.0f))));
         valid = S::bit_and(valid, S::bit_and(S::gt(t, S::set1(tmin)), S::le(t, S::set1(hit.t))));
         valid = S::bit_and(valid, S::lt(t, S::set1(std::numeric_limits<float>::infinity())));
-        return simd::record_nearest<S>(S::mask(valid), t, u, v, S::set1(1.0f), block.prim, hit);
+        return simd::record_nearest<S>(S::mask(valid), t, u, v, block.prim, hit);
     }
 #endif
 

@@ -111,24 +111,28 @@ struct Simd<8> {
 #endif
 
 // Records in `hit` the nearest of the lanes in `lanes` (a bit mask of valid hits) and returns its lane, or -1
-// when there are none; its barycentrics are u / den and v / den, divided for that lane only. Ties go to the
-// later lane, as the scalar kernel's loop over a leaf's triangles does.
+// when there are none. Its barycentrics are u and v, or u / den and v / den when `den` is given, divided for that
+// lane only (the calls are inlined with `den` a constant, so a test without it pays for no division). Ties go to
+// the later lane, as the scalar kernel's loop over a leaf's triangles does.
 template <class S>
 [[gnu::always_inline]] inline int record_nearest(uint32_t lanes, typename S::F t, typename S::F u, typename S::F v,
-                                                  typename S::F den, const uint32_t* prim, Hit& hit) {
+                                                  const uint32_t* prim, Hit& hit, const typename S::F* den = nullptr) {
     if (!lanes) return -1;
     constexpr int W = sizeof(typename S::F) / sizeof(float);
     alignas(32) float ts[W], us[W], vs[W], dens[W];
     S::store(ts, t);
     S::store(us, u);
     S::store(vs, v);
-    S::store(dens, den);
     int best = std::countr_zero(lanes);
     for (lanes &= lanes - 1; lanes; lanes &= lanes - 1) {
         const int lane = std::countr_zero(lanes);
         if (ts[lane] <= ts[best]) best = lane;
     }
-    hit = {ts[best], us[best] / dens[best], vs[best] / dens[best], prim[best]};
+    hit = {ts[best], us[best], vs[best], prim[best]};
+    if (den) {
+        S::store(dens, *den);
+        hit.u /= dens[best], hit.v /= dens[best];
+    }
     return best;
 }
 

@@ -108,7 +108,7 @@ public:
         F valid = S::and_not(S::bit_and(any_negative, any_positive), S::neq(det, zero));
         valid = S::bit_and(valid, S::bit_and(S::gt(t, t_min), S::le(t, t_max)));
         valid = S::bit_and(valid, S::lt(t, S::set1(std::numeric_limits<float>::infinity())));
-        return simd::record_nearest<S>(S::mask(valid), t, v, w, det, block.prim, hit);
+        return simd::record_nearest<S>(S::mask(valid), t, v, w, block.prim, hit, &det);
     }
 #endif
 
