@@ -632,7 +632,7 @@ TwoLevelBvh<N> build_two_level(const TwoLevelInput& input, const TwoLevelSetting
         bvh.objects[i].prim_base = bases[i];
         if (triangles.empty()) return;
         const Bvh object = builder.build(BuildInput{triangles, make_prim_refs(triangles)}, settings.blas);
-        trees[i] = collapse<N>(object, triangles);
+        trees[i] = collapse<N>(object, triangles, settings.collapse);
         bvh.objects[i].bounds = trees[i].bounds;
     });
     // A wide top level over at most one BRef per capacity slot has fewer nodes than slots (or one node).

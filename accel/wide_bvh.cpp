@@ -6,6 +6,8 @@
 #include <algorithm>
 #include <array>
 #include <bit>
+#include <limits>
+#include <stdexcept>
 
 namespace canopy {
 namespace {
@@ -51,6 +53,9 @@ inline void stream_fence() { _mm_sfence(); }
 // then repeatedly the inner child of largest surface area (the first of equals) replaced by its two children
 // until there are N.
 template <int N>
+class CollapsePlan;
+
+template <int N>
 struct WideChildren {
     std::array<uint32_t, N> node;
     int count = 0;
@@ -82,6 +87,115 @@ struct WideChildren {
     }
     // A root that is a leaf: one leaf child.
     explicit WideChildren(uint32_t leaf) : count(1) { node[0] = leaf; }
+    // The children a CollapsePlan chose.
+    WideChildren(const CollapsePlan<N>& plan, uint32_t index) : count(plan.children(index, node)) {}
+};
+
+// The least-cost wide tree over a binary one (Ylitie, Karras and Laine 2017, sec. 3.1). C(n, k), the least cost of
+// binary subtree n as at most k children of one wide node, is A(n) b(n) C_block for a leaf of b(n) blocks, and else
+//   C(n, 1) = min(A(n) C_block where n's triangles fit one block (n written as one leaf), A(n) C_node + S(n, N))
+//   C(n, k) = min(C(n, k - 1), S(n, k)) for k > 1,   S(n, k) = min over 0 < i < k of C(left, i) + C(right, k - i),
+// A being the surface area: each term is a node or block test times the chance that a ray makes it (eq. 1's
+// reasoning). The choices that reach each minimum are kept per node; a wide node's children unfold from them.
+template <int N>
+class CollapsePlan {
+public:
+    // `may_merge`: whether a subtree may be written as one leaf (only where leaves are triangle blocks).
+    CollapsePlan(const Bvh& bvh, bool enabled, bool may_merge, uint32_t lanes)
+        : bvh_(bvh), may_merge_(may_merge), lanes_(lanes), parallel_(bvh.nodes.size() >= kParallelNodes) {
+        if (!enabled || bvh.nodes.empty() || bvh.nodes[0].is_leaf()) return;
+        choice_.resize(bvh.nodes.size());
+        solve(0, 0);
+    }
+
+    bool enabled() const { return !choice_.empty(); }
+
+    // Whether inner binary node n is written as one leaf of its subtree's triangles.
+    bool merged(uint32_t n) const { return choice_[n].leaf; }
+
+    // The children of the wide node made of inner binary node n, in depth-first order; returns how many.
+    int children(uint32_t n, std::array<uint32_t, N>& out) const {
+        int count = 0;
+        const uint32_t left = bvh_.nodes[n].index;
+        expand(left, choice_[n].split[N], out, count);
+        expand(left + 1, N - choice_[n].split[N], out, count);
+        return count;
+    }
+
+private:
+    // Test costs of canopy's bvh8 kernel, relative: one 8-lane block test against one node test. Frames hardly
+    // moved with the block's cost from 0.5 to 1.5 (crytek-sponza bvh8 / Embree MEDIUM 1.000, 1.007, 1.004, 1.000 at
+    // 0.5, 0.75, 1, 1.5); at 1 sbvh and conference traced fastest of 1, 1.5 and 2.
+    static constexpr float kNodeTest = 1.0f;
+    static constexpr float kBlockTest = 1.0f;
+    static constexpr size_t kParallelNodes = 16 * 1024;  // smaller trees are planned on one thread
+    static constexpr uint32_t kParallelDepth = 10;        // levels whose two subtrees are planned concurrently
+
+    using Costs = std::array<float, N + 1>;  // C(n, k) at k = 1..N
+    struct Solved {
+        Costs cost;
+        uint32_t triangles;  // in the subtree, counted up to lanes + 1
+    };
+    struct Choice {
+        std::array<uint8_t, N + 1> split{};  // S(n, k)'s share of the left child, at k = 2..N
+        uint16_t fewer = 0;                   // bit k: C(n, k) = C(n, k - 1), so n takes fewer than k slots
+        bool leaf = false;                    // C(n, 1) is one leaf of n's triangles
+    };
+
+    Solved solve(uint32_t n, uint32_t depth) {
+        const BvhNode& node = bvh_.nodes[n];
+        const float area = node.bounds.half_area();
+        Solved solved;
+        if (node.is_leaf()) {
+            solved.cost.fill(area * kBlockTest * float((node.count + lanes_ - 1) / lanes_));
+            solved.triangles = std::min(node.count, lanes_ + 1);
+            return solved;
+        }
+        Solved left, right;
+        parallel::fork_join(parallel_ && depth < kParallelDepth, 1, [&] { left = solve(node.index, depth + 1); },
+                            [&] { right = solve(node.index + 1, depth + 1); });
+        Choice& choice = choice_[n];
+        Costs shared;
+        for (int k = 2; k <= N; ++k) {
+            shared[k] = std::numeric_limits<float>::infinity();
+            for (int i = 1; i < k; ++i) {
+                const float cost = left.cost[i] + right.cost[k - i];
+                if (cost < shared[k]) shared[k] = cost, choice.split[k] = uint8_t(i);
+            }
+        }
+        solved.triangles = std::min(left.triangles + right.triangles, lanes_ + 1);
+        const float as_node = area * kNodeTest + shared[N];
+        const float as_leaf = may_merge_ && solved.triangles <= lanes_ ? area * kBlockTest : std::numeric_limits<float>::infinity();
+        choice.leaf = as_leaf < as_node;
+        solved.cost[1] = std::min(as_leaf, as_node);
+        for (int k = 2; k <= N; ++k) {
+            const bool fewer = solved.cost[k - 1] <= shared[k];
+            solved.cost[k] = fewer ? solved.cost[k - 1] : shared[k];
+            choice.fewer |= uint16_t(uint16_t(fewer) << k);
+        }
+        return solved;
+    }
+
+    // Appends binary subtree n given k slots: n itself when it takes one, else its children's shares.
+    void expand(uint32_t n, int k, std::array<uint32_t, N>& out, int& count) const {
+        if (!bvh_.nodes[n].is_leaf()) {
+            const Choice& c = choice_[n];
+            while (k > 1 && (c.fewer >> k & 1)) --k;
+            if (k > 1) {
+                const uint32_t left = bvh_.nodes[n].index;
+                expand(left, c.split[k], out, count);
+                expand(left + 1, k - c.split[k], out, count);
+                return;
+            }
+        }
+        out[count++] = n;
+    }
+
+    const Bvh& bvh_;
+    const bool may_merge_;
+    const uint32_t lanes_;
+    const bool parallel_;
+    std::vector<Choice> choice_;  // by binary node; empty when the plan is not used
 };
 
 // Collapses so that subtrees are written in parallel yet land exactly where the serial depth-first order puts
@@ -111,8 +225,10 @@ class Collapser {
     };
 
 public:
-    Collapser(const Bvh& bvh, WideNodes<N>& nodes, uint32_t (*entries)(int, uint32_t), LeafSink& sink)
-        : bvh_(bvh), nodes_(nodes), entries_(entries), sink_(sink),
+    Collapser(const Bvh& bvh, WideNodes<N>& nodes, uint32_t (*entries)(int, uint32_t), LeafSink& sink,
+              CollapseMethod method)
+        : bvh_(bvh), plan_(bvh, method == CollapseMethod::Optimal && N > 2, kMerges, kLanes), nodes_(nodes),
+          entries_(entries), sink_(sink),
           top_depth_(bvh.nodes.size() < kParallelNodes ? 0 : kTopDepth),
           top_extents_(slot_of(top_depth_ + 1, 0)), top_merged_(top_extents_.size()),
           subtrees_(slot_of(top_depth_ + 1, 0) - slot_of(top_depth_, 0)) {}
@@ -153,7 +269,7 @@ private:
     // `path`.
     Extent measure(uint32_t index, uint32_t depth, uint32_t path) {
         if (depth == top_depth_) return record(index, subtrees_[path]);
-        WideChildren<N> children(bvh_, index);
+        WideChildren<N> children = children_of(index);
         for (int i = 0; i < children.count; ++i) {
             Refs& refs = top_merged_[slot_of(depth + 1, path * N + uint32_t(i))];
             if (merges(children.node[i], refs)) children.merged |= 1u << i;
@@ -170,7 +286,7 @@ private:
 
     // Measures a subtree below the top levels (its root not merged), appending its wide nodes in depth-first order.
     Extent record(uint32_t index, Recorded& out) {
-        WideChildren<N> children(bvh_, index);
+        WideChildren<N> children = children_of(index);
         if (!has_ranges()) prefetch_grandchildren(children);
         for (int i = 0; i < children.count; ++i) {
             Refs refs;
@@ -186,12 +302,19 @@ private:
         return total;
     }
 
-    // Whether binary node `index` is an inner node whose subtree is at most a block's lanes of one-triangle leaves;
-    // if so, `refs` receives them in depth-first order, else it is all kNoRef. The walk stops at the first leaf past
-    // that (its stack never grows past the lanes' count plus one on a subtree that merges).
+    // A wide node's children, as the plan chose them or greedily.
+    WideChildren<N> children_of(uint32_t index) const {
+        return plan_.enabled() ? WideChildren<N>(plan_, index) : WideChildren<N>(bvh_, index);
+    }
+
+    // Whether binary node `index` is an inner node written as one leaf: one the plan merged, or greedily one whose
+    // subtree is at most a block's lanes of one-triangle leaves. If so, `refs` receives its refs in depth-first
+    // order, else it is all kNoRef. The walk stops at the first leaf past a block's lanes (its stack never grows
+    // past the lanes' count plus one on a subtree that merges).
     bool merges(uint32_t index, Refs& refs) const {
         refs.fill(kNoRef);
         if (!kMerges || bvh_.nodes[index].is_leaf()) return false;
+        if (plan_.enabled() && !plan_.merged(index)) return false;
         if (has_ranges()) {  // no walk: the builder knows the subtree's refs
             const SubtreeRefs subtree = bvh_.one_ref_leaves[index];
             if (subtree.count > kLanes) return false;
@@ -206,8 +329,8 @@ private:
         while (sp) {
             const BvhNode& node = bvh_.nodes[stack[--sp]];
             if (node.is_leaf()) {
-                if (node.count != 1 || n == kLanes) return false;
-                found[n++] = node.index;
+                if ((node.count != 1 && !plan_.enabled()) || n + node.count > kLanes) return false;
+                for (uint32_t k = 0; k < node.count; ++k) found[n++] = node.index + k;
             } else {
                 if (sp + 2 > stack.size()) return false;
                 stack[sp++] = node.index + 1;
@@ -264,7 +387,7 @@ private:
     // inner child's subtree starts where its earlier siblings' extents end, so they are written concurrently.
     void fill(uint32_t index, uint32_t self, uint32_t depth, uint32_t path, Cursor at) {
         if (depth == top_depth_) return replay(subtrees_[path], self, at);
-        WideChildren<N> children(bvh_, index);
+        WideChildren<N> children = children_of(index);
         std::array<Refs, N> merged;
         int merged_count = 0;
         for (int i = 0; i < children.count; ++i) {
@@ -377,6 +500,7 @@ private:
     }
 
     const Bvh& bvh_;
+    const CollapsePlan<N> plan_;  // enabled for the optimal method at widths above 2 (at 2 both methods agree)
     WideNodes<N>& nodes_;
     uint32_t (*entries_)(int, uint32_t);
     LeafSink& sink_;
@@ -467,29 +591,35 @@ struct TriangleLeaves {
 
 }  // namespace
 
+CollapseMethod parse_collapse_method(const std::string& name) {
+    if (name == "optimal") return CollapseMethod::Optimal;
+    if (name == "greedy") return CollapseMethod::Greedy;
+    throw std::invalid_argument("unknown collapse '" + name + "' (known: optimal, greedy)");
+}
+
 template <int N>
 std::vector<LeafRun> collapse_nodes(const Bvh& bvh, WideNodes<N>& nodes, uint32_t (*entries)(int, uint32_t),
                                     uint32_t& total_entries) {
     RunList list;
-    total_entries = Collapser<N, RunList>(bvh, nodes, entries, list).run().entries;
+    total_entries = Collapser<N, RunList>(bvh, nodes, entries, list, CollapseMethod::Greedy).run().entries;
     return std::move(list.runs);
 }
 
 template <int N>
-WideBvh<N> collapse(const Bvh& bvh, std::span<const Triangle> triangles) {
+WideBvh<N> collapse(const Bvh& bvh, std::span<const Triangle> triangles, CollapseMethod method) {
     WideBvh<N> out;
     if (bvh.nodes.empty()) return out;
     out.bounds = bvh.nodes[0].bounds;
     TriangleLeaves<N> leaves{out, bvh, triangles};
-    Collapser<N, TriangleLeaves<N>>(bvh, out.nodes, &leaf_entries, leaves).run();
+    Collapser<N, TriangleLeaves<N>>(bvh, out.nodes, &leaf_entries, leaves, method).run();
     return out;
 }
 
 template std::vector<LeafRun> collapse_nodes<2>(const Bvh&, WideNodes<2>&, uint32_t (*)(int, uint32_t), uint32_t&);
 template std::vector<LeafRun> collapse_nodes<4>(const Bvh&, WideNodes<4>&, uint32_t (*)(int, uint32_t), uint32_t&);
 template std::vector<LeafRun> collapse_nodes<8>(const Bvh&, WideNodes<8>&, uint32_t (*)(int, uint32_t), uint32_t&);
-template WideBvh<2> collapse<2>(const Bvh&, std::span<const Triangle>);
-template WideBvh<4> collapse<4>(const Bvh&, std::span<const Triangle>);
-template WideBvh<8> collapse<8>(const Bvh&, std::span<const Triangle>);
+template WideBvh<2> collapse<2>(const Bvh&, std::span<const Triangle>, CollapseMethod);
+template WideBvh<4> collapse<4>(const Bvh&, std::span<const Triangle>, CollapseMethod);
+template WideBvh<8> collapse<8>(const Bvh&, std::span<const Triangle>, CollapseMethod);
 
 }  // namespace canopy

@@ -6,6 +6,7 @@
 #include "accel/huge_page_allocator.h"
 
 #include <span>
+#include <string>
 #include <type_traits>
 
 namespace canopy {
@@ -87,11 +88,24 @@ struct WideBvh {
     uint64_t bytes() const { return nodes.size() * sizeof(WideNode<N>) + leaves.size() * sizeof(Leaf); }
 };
 
-// SAH-driven collapse (Ganestam and Doggett 2016, sec. 4.2): a node's children are its binary
-// children, then repeatedly the inner child with the largest surface area is replaced by its two
-// children until there are N. A root that is a leaf becomes a node with one leaf child.
+// How collapse() chooses each wide node's children from the binary tree below it.
+enum class CollapseMethod {
+    // The least-cost wide tree (Ylitie, Karras and Laine 2017, sec. 3.1): which binary nodes become wide nodes,
+    // which are opened into their parent's slots, and which subtrees of at most a block's triangles become one
+    // leaf, by a dynamic program over the binary tree that charges node tests and block tests by surface area.
+    Optimal,
+    // SAH-driven greedy collapse (Ganestam and Doggett 2016, sec. 4.2): a node's children are its binary children,
+    // then repeatedly the inner child with the largest surface area is replaced by its two children until there
+    // are N.
+    Greedy,
+};
+
+// "optimal" or "greedy"; otherwise throws std::invalid_argument naming the known methods.
+CollapseMethod parse_collapse_method(const std::string& name);
+
+// The wide tree of a binary one. A root that is a leaf becomes a node with one leaf child.
 template <int N>
-WideBvh<N> collapse(const Bvh& bvh, std::span<const Triangle> triangles);
+WideBvh<N> collapse(const Bvh& bvh, std::span<const Triangle> triangles, CollapseMethod method = CollapseMethod::Optimal);
 
 // A leaf of a wide tree: its first entry in the tree's leaf array, and the binary leaf's refs it is made of.
 struct LeafRun {
@@ -99,7 +113,8 @@ struct LeafRun {
 };
 
 // The node half of collapse, for trees whose leaves hold something else than triangles (the two-level top
-// level): writes `nodes`; a binary leaf of n refs takes entries(N, n) leaf entries, `total_entries` in all.
+// level), by the greedy method (the optimal one's costs are those of triangle blocks): writes `nodes`; a binary
+// leaf of n refs takes entries(N, n) leaf entries, `total_entries` in all.
 // Returns the leaves in emission order, for the caller to fill.
 template <int N>
 std::vector<LeafRun> collapse_nodes(const Bvh& bvh, WideNodes<N>& nodes, uint32_t (*entries)(int, uint32_t),

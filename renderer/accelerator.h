@@ -75,6 +75,7 @@ struct CanopyOptions {
     // builder "auto" plans for this many frames of this many pixels (time to image = build + frames x frame).
     int frames_planned = 16;
     uint64_t pixels = 1024 * 768;
+    CollapseMethod collapse = CollapseMethod::Optimal;  // of the binary tree into the wide layout (bvh4, bvh8)
 };
 
 // Throws std::invalid_argument for an unknown builder or kernel, or a two-level top level (it needs the scene).

@@ -64,9 +64,11 @@ std::vector<Entry> make_entries(const Scene& scene, const FlatScene& flat, const
         for (const std::string& builder : toplevel == "flat" || o.blas_builders.empty() ? o.builders : o.blas_builders)
             for (const std::string& kernel : o.kernels)
                 for (const std::string& traversal : o.traversals)
-                    for (const std::string& intersector : o.intersectors) {
-                        const CanopyOptions options{builder, optimiser_start(builder, o.start), kernel,
-                                                    traversal == "robust", intersector == "watertight", toplevel};
+                    for (const std::string& intersector : o.intersectors)
+                    for (const std::string& collapse : o.collapses) {
+                        CanopyOptions options{builder, optimiser_start(builder, o.start), kernel,
+                                              traversal == "robust", intersector == "watertight", toplevel};
+                        options.collapse = parse_collapse_method(collapse);
                         if (builder != "auto") {
                             entries.push_back({make_canopy_accelerator(scene, flat, options)});
                             continue;

@@ -14,6 +14,7 @@ struct BenchOptions {
     std::vector<std::string> blas_builders;  // object BVH builders of the two-level rows; empty: `builders`
     std::vector<std::string> traversals{"robust"};      // robust, fast
     std::vector<std::string> intersectors{"watertight"};  // watertight, moller
+    std::vector<std::string> collapses{"optimal"};        // optimal, greedy
     std::vector<std::string> embree_qualities;  // empty: no Embree rows
     int builds = 20;
     int frames = 10;

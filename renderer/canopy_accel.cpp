@@ -29,8 +29,8 @@ auto with_modes(const CanopyOptions& o, F&& f) {
 using AnyLayout = std::variant<WideBvh<2>, WideBvh<4>, WideBvh<8>, TwoLevelBvh<2>, TwoLevelBvh<4>, TwoLevelBvh<8>>;
 
 template <int N>
-void collapse_into(AnyLayout& layout, const Bvh& bvh, std::span<const Triangle> triangles) {
-    if constexpr (kernel_compiled(N)) layout = collapse<N>(bvh, triangles);
+void collapse_into(AnyLayout& layout, const Bvh& bvh, std::span<const Triangle> triangles, CollapseMethod method) {
+    if constexpr (kernel_compiled(N)) layout = collapse<N>(bvh, triangles, method);
 }
 
 template <int N>
@@ -92,6 +92,7 @@ public:
             if (!objects) throw std::invalid_argument("top level '" + options.toplevel + "' needs the scene's objects");
             two_level_settings_.blas_builder = options.builder;
             two_level_settings_.blas = settings_;
+            two_level_settings_.collapse = options.collapse;
             two_level_input_ = two_level_input(*objects);
         }
     }
@@ -104,7 +105,8 @@ public:
         return two_level_input_ ? options_.toplevel + "/" + name : name;
     }
     std::string kernel() const override {
-        return kernel_name(width_) + (options_.robust ? "" : " fast") + (options_.watertight ? "" : " mt");
+        const bool greedy = options_.collapse == CollapseMethod::Greedy && width_ > 2;  // at width 2 both agree
+        return kernel_name(width_) + (greedy ? " greedy" : "") + (options_.robust ? "" : " fast") + (options_.watertight ? "" : " mt");
     }
     std::string quality() const override { return ""; }
 
@@ -139,9 +141,9 @@ public:
         }
         binary_ = builder_.build(BuildInput{scene_.triangles, std::move(refs_)}, settings_);
         switch (width_) {
-            case 2: collapse_into<2>(layout_, binary_, scene_.triangles); break;
-            case 4: collapse_into<4>(layout_, binary_, scene_.triangles); break;
-            default: collapse_into<8>(layout_, binary_, scene_.triangles); break;
+            case 2: collapse_into<2>(layout_, binary_, scene_.triangles, options_.collapse); break;
+            case 4: collapse_into<4>(layout_, binary_, scene_.triangles, options_.collapse); break;
+            default: collapse_into<8>(layout_, binary_, scene_.triangles, options_.collapse); break;
         }
     }
 

@@ -31,7 +31,7 @@ struct RenderOptions {
     int spp = 1, threads = 0, bounces = 8;
     std::vector<int> size{1024, 768};
     bool material_albedo = false, heatmap = false;
-    std::string traversal = "robust", intersector = "watertight";
+    std::string traversal = "robust", intersector = "watertight", collapse = "optimal";
 };
 
 std::string builder_names() {
@@ -68,7 +68,8 @@ void run_render(RenderOptions o) {
         o.accel == "embree" ? make_embree_accelerator(flat, o.embree_quality, o.threads)
                             : make_canopy_accelerator(scene, flat, {o.builder, o.start, o.kernel, o.traversal == "robust", o.intersector == "watertight", o.toplevel,
                                                                    o.frames_planned ? o.frames_planned : o.spp,
-                                                                   uint64_t(o.size[0]) * uint64_t(o.size[1])});
+                                                                   uint64_t(o.size[0]) * uint64_t(o.size[1]),
+                                                                   parse_collapse_method(o.collapse)});
     const auto start = std::chrono::steady_clock::now();
     accel->prepare();
     accel->build();
@@ -149,6 +150,8 @@ int main(int argc, char** argv) {
         ->check(CLI::IsMember({"robust", "fast"}))->capture_default_str();
     render->add_option("--intersector", r.intersector, "watertight (Woop et al. 2013) or moller (Möller–Trumbore, fast)")
         ->check(CLI::IsMember({"watertight", "moller"}))->capture_default_str();
+    render->add_option("--collapse", r.collapse, "Binary tree to bvh4/bvh8: optimal (Ylitie et al. 2017) or greedy (largest area first)")
+        ->check(CLI::IsMember({"optimal", "greedy"}))->capture_default_str();
 
     BenchOptions b;
     std::vector<std::string> accels;
@@ -180,6 +183,8 @@ int main(int argc, char** argv) {
         ->check(CLI::IsMember({"robust", "fast"}))->capture_default_str();
     bench->add_option("--intersector", b.intersectors, "Intersectors: watertight, moller (Möller–Trumbore)")->delimiter(',')
         ->check(CLI::IsMember({"watertight", "moller"}))->capture_default_str();
+    bench->add_option("--collapse", b.collapses, "Collapses of the binary tree to bvh4/bvh8: optimal (Ylitie et al. 2017), greedy (largest area first)")
+        ->delimiter(',')->check(CLI::IsMember({"optimal", "greedy"}))->capture_default_str();
     std::string dynamic;
     CLI::Option* dynamic_option =
         bench->add_option("--dynamic", dynamic,

@@ -6,6 +6,9 @@
 
 #include <algorithm>
 #include <cstring>
+#include <limits>
+#include <map>
+#include <optional>
 
 using namespace canopy;
 using namespace canopy::test;
@@ -14,12 +17,76 @@ namespace {
 
 constexpr uint32_t kNoPrim = 0xffffffffu;
 
-// The collapse written plainly and serially from its specification: a wide node's children are the binary
-// node's children, the inner one of largest area opened until there are N (ties to the first); its inner
-// children take consecutive slots, then each one's subtree follows in turn; leaves take entries in the order
-// their parents are written. With `triangles`, leaves are filled with them, and with blocks (N > 2) the
-// one-triangle leaves of a node share blocks, a lane each, and an inner child whose subtree is at most a block's
-// lanes of one-triangle leaves is one leaf of them in depth-first order; without, each leaf is a run.
+// CollapseMethod::Optimal's dynamic program written plainly from its equations (wide_bvh.cpp), costs memoised by
+// (node, slots), with the same tie rules: the smallest left share among equal costs, fewer slots where they cost no
+// more, and a wide node rather than one leaf where the two cost the same.
+template <int N>
+struct PlainPlan {
+    static constexpr uint32_t kLanes = uint32_t(block_lanes(N));
+    const Bvh& bvh;
+    bool may_merge;
+    std::map<std::pair<uint32_t, int>, float> memo;
+
+    uint32_t triangles(uint32_t n) const {
+        const BvhNode& node = bvh.nodes[n];
+        return node.is_leaf() ? node.count : triangles(node.index) + triangles(node.index + 1);
+    }
+    float area(uint32_t n) const { return bvh.nodes[n].bounds.half_area(); }
+    bool fits_block(uint32_t n) const { return may_merge && triangles(n) <= kLanes; }
+
+    // S(n, k) and the left child's share that reaches it.
+    std::pair<float, int> shared(uint32_t n, int k) {
+        std::pair<float, int> best{std::numeric_limits<float>::infinity(), 0};
+        for (int i = 1; i < k; ++i) {
+            const float c = cost(bvh.nodes[n].index, i) + cost(bvh.nodes[n].index + 1, k - i);
+            if (c < best.first) best = {c, i};
+        }
+        return best;
+    }
+    float as_node(uint32_t n) { return area(n) + shared(n, N).first; }
+    bool merged(uint32_t n) { return !bvh.nodes[n].is_leaf() && fits_block(n) && area(n) < as_node(n); }
+
+    // C(n, k), block and node tests both of cost 1.
+    float cost(uint32_t n, int k) {
+        const BvhNode& node = bvh.nodes[n];
+        if (node.is_leaf()) return area(n) * float(leaf_entries(N, node.count));
+        if (const auto it = memo.find({n, k}); it != memo.end()) return it->second;
+        float c;
+        if (k == 1) c = std::min(fits_block(n) ? area(n) : std::numeric_limits<float>::infinity(), as_node(n));
+        else c = std::min(cost(n, k - 1), shared(n, k).first);
+        return memo[{n, k}] = c;
+    }
+
+    // Subtree n given k slots: itself, or its children's shares.
+    void unfold(uint32_t n, int k, std::vector<uint32_t>& out) {
+        if (!bvh.nodes[n].is_leaf()) {
+            while (k > 1 && cost(n, k - 1) <= shared(n, k).first) --k;
+            if (k > 1) {
+                const int i = shared(n, k).second;
+                unfold(bvh.nodes[n].index, i, out);
+                unfold(bvh.nodes[n].index + 1, k - i, out);
+                return;
+            }
+        }
+        out.push_back(n);
+    }
+    std::vector<uint32_t> children(uint32_t n) {
+        std::vector<uint32_t> out;
+        const int i = shared(n, N).second;
+        unfold(bvh.nodes[n].index, i, out);
+        unfold(bvh.nodes[n].index + 1, N - i, out);
+        return out;
+    }
+};
+
+// The collapse written plainly and serially from its specification. A wide node's children are, for the greedy
+// method, the binary node's children, the inner one of largest area opened until there are N (ties to the
+// first), and for the optimal method (at widths above 2) what PlainPlan unfolds. Its inner children take
+// consecutive slots, then each one's subtree follows in turn; leaves take entries in the order their parents are
+// written. With `triangles`, leaves are filled with them, and with blocks (N > 2) the one-triangle leaves of a node
+// share blocks, a lane each, and an inner child is one leaf of its subtree's triangles in depth-first order where
+// the plan merged it, or greedily where its subtree is at most a block's lanes of one-triangle leaves; without,
+// each leaf is a run.
 template <int N>
 struct SerialCollapse {
     using Leaf = LeafOf<N>;
@@ -31,12 +98,17 @@ struct SerialCollapse {
     std::vector<Leaf> leaves;
     uint32_t entries = 0;
 
-    SerialCollapse(const Bvh& tree, std::span<const Triangle> tris = {}) : bvh(tree), triangles(tris) {
+    std::optional<PlainPlan<N>> plan;
+
+    SerialCollapse(const Bvh& tree, std::span<const Triangle> tris = {}, CollapseMethod method = CollapseMethod::Greedy)
+        : bvh(tree), triangles(tris) {
+        if (method == CollapseMethod::Optimal && N > 2) plan.emplace(PlainPlan<N>{tree, blocks(), {}});
         nodes.resize(1);
         write(0, tree.nodes[0].is_leaf() ? std::vector<uint32_t>{0} : open(0));
     }
 
-    std::vector<uint32_t> open(uint32_t index) const {
+    std::vector<uint32_t> open(uint32_t index) {
+        if (plan) return plan->children(index);
         std::vector<uint32_t> children{bvh.nodes[index].index, bvh.nodes[index].index + 1};
         while (children.size() < size_t(N)) {
             size_t widest = children.size();
@@ -95,11 +167,21 @@ struct SerialCollapse {
 
     bool blocks() const { return !triangles.empty() && N > 2; }
 
-    // The refs of an inner node's subtree in depth-first order when it is at most kLanes one-triangle leaves.
-    std::vector<uint32_t> small_subtree_refs(uint32_t index) const {
+    // The refs of an inner node's subtree in depth-first order when it is written as one leaf.
+    std::vector<uint32_t> small_subtree_refs(uint32_t index) {
         std::vector<uint32_t> refs;
-        if (bvh.nodes[index].is_leaf() || !one_triangle_leaves(index, refs) || refs.size() > kLanes) return {};
+        if (bvh.nodes[index].is_leaf()) return {};
+        if (plan) {
+            if (plan->merged(index)) all_refs(index, refs);
+            return refs;
+        }
+        if (!one_triangle_leaves(index, refs) || refs.size() > kLanes) return {};
         return refs;
+    }
+    void all_refs(uint32_t index, std::vector<uint32_t>& refs) const {
+        const BvhNode& n = bvh.nodes[index];
+        if (!n.is_leaf()) return all_refs(n.index, refs), all_refs(n.index + 1, refs);
+        for (uint32_t k = 0; k < n.count; ++k) refs.push_back(n.index + k);
     }
     bool one_triangle_leaves(uint32_t index, std::vector<uint32_t>& refs) const {
         const BvhNode& n = bvh.nodes[index];
@@ -139,10 +221,14 @@ bool same_bytes(const std::vector<T, A>& a, const std::vector<T, B>& b) {
     return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(T)) == 0;
 }
 
+constexpr CollapseMethod kMethods[] = {CollapseMethod::Optimal, CollapseMethod::Greedy};
+
+const char* name_of(CollapseMethod method) { return method == CollapseMethod::Optimal ? "optimal" : "greedy"; }
+
 template <int N>
 void check_against_serial(const Bvh& bvh, std::span<const Triangle> tris, const std::string& what) {
     INFO(what << " bvh" << N);
-    const SerialCollapse<N> runs_only(bvh);
+    const SerialCollapse<N> runs_only(bvh);  // the node half is greedy
     WideNodes<N> nodes;
     uint32_t entries = 0;
     const std::vector<LeafRun> runs = collapse_nodes<N>(bvh, nodes, &leaf_entries, entries);
@@ -150,24 +236,43 @@ void check_against_serial(const Bvh& bvh, std::span<const Triangle> tris, const 
     CHECK(same_bytes(runs, runs_only.runs));
     CHECK(entries == runs_only.entries);
 
-    const SerialCollapse<N> expected(bvh, tris);
-    const WideBvh<N> wide = collapse<N>(bvh, tris);
-    CHECK(same_bytes(wide.nodes, expected.nodes));
-    CHECK(same_bytes(wide.leaves, expected.leaves));
+    for (const CollapseMethod method : kMethods) {
+        INFO(name_of(method));
+        const SerialCollapse<N> expected(bvh, tris, method);
+        const WideBvh<N> wide = collapse<N>(bvh, tris, method);
+        CHECK(same_bytes(wide.nodes, expected.nodes));
+        CHECK(same_bytes(wide.leaves, expected.leaves));
+    }
 }
 
 template <int N>
-WideBvh<N> collapse_with_threads(const Bvh& bvh, std::span<const Triangle> tris, int threads) {
+WideBvh<N> collapse_with_threads(const Bvh& bvh, std::span<const Triangle> tris, int threads, CollapseMethod method) {
     tbb::global_control limit(tbb::global_control::max_allowed_parallelism, size_t(threads));
-    return collapse<N>(bvh, tris);
+    return collapse<N>(bvh, tris, method);
 }
 
 template <int N>
 void check_thread_independence(const Bvh& bvh, std::span<const Triangle> tris, const std::string& what) {
-    INFO(what << " bvh" << N);
-    const WideBvh<N> one = collapse_with_threads<N>(bvh, tris, 1), two = collapse_with_threads<N>(bvh, tris, 2);
-    CHECK(same_bytes(one.nodes, two.nodes));
-    CHECK(same_bytes(one.leaves, two.leaves));
+    for (const CollapseMethod method : kMethods) {
+        INFO(what << " bvh" << N << " " << name_of(method));
+        const WideBvh<N> one = collapse_with_threads<N>(bvh, tris, 1, method), two = collapse_with_threads<N>(bvh, tris, 2, method);
+        CHECK(same_bytes(one.nodes, two.nodes));
+        CHECK(same_bytes(one.leaves, two.leaves));
+    }
+}
+
+// The cost the optimal method minimises (wide_bvh.cpp): surface area times one per node test (the root's and each
+// inner child's) and one per leaf block a leaf child's visit tests.
+template <int N>
+double modelled_cost(const WideBvh<N>& wide) {
+    double cost = wide.bounds.half_area();
+    for (const WideNode<N>& node : wide.nodes)
+        for (int i = 0; i < N; ++i) {
+            if (node.is_empty(i)) continue;
+            const BBox box{Vec3(node.lower(0, i), node.lower(1, i), node.lower(2, i)), Vec3(node.upper(0, i), node.upper(1, i), node.upper(2, i))};
+            cost += double(box.half_area()) * (node.is_leaf(i) ? double(leaf_entries(N, node.count[i])) : 1.0);
+        }
+    return cost;
 }
 
 }  // namespace
@@ -205,6 +310,7 @@ TEST_CASE("a root that is a leaf collapses to one node with one leaf child", "[b
 }
 
 TEST_CASE("one-triangle leaves of a wide node share a block, a lane each in child order", "[builders][collapse]") {
+    // Greedy collapse, whose choice of children this case spells out; the optimal one shares blocks the same way.
     // Root over inner nodes 1 (the larger, opened first) and 2; node 1 over leaf 3 (triangle 0) and leaf 4
     // (triangles 1 and 2), node 2 over leaves 5 (triangle 3) and 6 (triangle 4). Width 4 opens both: children
     // 3, 5, 4, 6.
@@ -222,7 +328,7 @@ TEST_CASE("one-triangle leaves of a wide node share a block, a lane each in chil
     check_against_serial<4>(bvh, tris, "shared block");
     check_against_serial<8>(bvh, tris, "shared block");
 
-    const WideBvh<4> wide = collapse<4>(bvh, tris);
+    const WideBvh<4> wide = collapse<4>(bvh, tris, CollapseMethod::Greedy);
     REQUIRE(wide.nodes.size() == 1);
     REQUIRE(wide.leaves.size() == 2);
     const WideNode<4>& root = wide.nodes[0];
@@ -242,7 +348,7 @@ TEST_CASE("one-triangle leaves of a wide node share a block, a lane each in chil
     CHECK(hit.prim == 4);
 }
 
-TEST_CASE("an inner child of at most a block's lanes of one-triangle leaves is one leaf", "[builders][collapse]") {
+TEST_CASE("greedily, an inner child of at most a block's lanes of one-triangle leaves is one leaf", "[builders][collapse]") {
     // Root over nodes 1 and 2; node 1 over 3 and 4, node 2 over 5 and 6, which width 4 opens into its children.
     // Nodes 3, 5 and 6 hold two one-triangle leaves each: each is written as one leaf of two triangles. Node 4
     // holds a two-triangle leaf, so it stays a wide node.
@@ -266,7 +372,7 @@ TEST_CASE("an inner child of at most a block's lanes of one-triangle leaves is o
     check_against_serial<4>(bvh, tris, "merged subtrees");
     check_against_serial<8>(bvh, tris, "merged subtrees");
 
-    const WideBvh<4> wide = collapse<4>(bvh, tris);
+    const WideBvh<4> wide = collapse<4>(bvh, tris, CollapseMethod::Greedy);
     REQUIRE(wide.nodes.size() == 2);
     const WideNode<4>& root = wide.nodes[0];
     std::vector<uint32_t> counts(root.count, root.count + 4);
@@ -279,5 +385,56 @@ TEST_CASE("an inner child of at most a block's lanes of one-triangle leaves is o
         CHECK(block.prim[2] == kNoPrim);
     }
     // Width 8 opens everything into the root but nine triangles exceed a block: no merge, the root's leaves.
-    CHECK(collapse<8>(bvh, tris).nodes.size() == 1);
+    CHECK(collapse<8>(bvh, tris, CollapseMethod::Greedy).nodes.size() == 1);
+}
+
+TEST_CASE("the optimal collapse writes a subtree that fits a block as one leaf where that costs less", "[builders][collapse]") {
+    // Root over node 1 and leaf 2 (triangle 6, far off); node 1 over leaves 3 (triangles 0 to 2) and 4 (3 to 5),
+    // six triangles stacked 0.01 apart, so both leaves' boxes are nearly node 1's: one block test over node 1's box
+    // costs about half of testing both leaves. The greedy collapse opens node 1 into the root's free slots.
+    std::vector<Triangle> tris;
+    for (int i = 0; i < 6; ++i) {
+        const float z = 0.01f * float(i);
+        tris.push_back({Vec3(0, 0, z), Vec3(1, 0, z), Vec3(0, 1, z)});
+    }
+    tris.push_back({Vec3(10, 0, 0), Vec3(11, 0, 0), Vec3(10, 1, 0)});
+    auto box = [&](int first, int last) {
+        BBox b;
+        for (int i = first; i <= last; ++i) b.extend(BBox::of(tris[size_t(i)]));
+        return b;
+    };
+    Bvh bvh;
+    bvh.refs = {0, 1, 2, 3, 4, 5, 6};
+    bvh.nodes = {{box(0, 6), 1, 0}, {box(0, 5), 3, 0}, {box(6, 6), 6, 1}, {box(0, 2), 0, 3}, {box(3, 5), 3, 3}};
+    check_against_serial<4>(bvh, tris, "merged multi-triangle leaves");
+    check_against_serial<8>(bvh, tris, "merged multi-triangle leaves");
+
+    const WideBvh<8> optimal = collapse<8>(bvh, tris), greedy = collapse<8>(bvh, tris, CollapseMethod::Greedy);
+    REQUIRE(optimal.nodes.size() == 1);
+    const WideNode<8>& root = optimal.nodes[0];
+    CHECK(std::vector<uint32_t>(root.count, root.count + 3) == std::vector<uint32_t>{6, 1, 0});
+    const TriangleBlock<block_lanes(8)>& block = optimal.leaves[root.child[0]];
+    for (uint32_t lane = 0; lane < 6; ++lane) CHECK(block.prim[lane] == lane);  // depth-first order
+    CHECK(std::vector<uint32_t>(greedy.nodes[0].count, greedy.nodes[0].count + 4) == std::vector<uint32_t>{3, 1, 3, 0});
+    CHECK(modelled_cost(optimal) < modelled_cost(greedy));
+    // The nearest of the stacked triangles is found through the merged leaf.
+    Hit hit;
+    CHECK(closest_hit(optimal, Ray{{0.2f, 0.2f, 1.0f}, {0, 0, -1}}, hit));
+    CHECK(hit.prim == 5);
+}
+
+TEST_CASE("the optimal collapse costs no more than the greedy one", "[builders][collapse]") {
+    // The greedy method's trees are among those the dynamic program chooses from, so its modelled cost bounds the
+    // optimal one's, on every builder's tree (lbvh: one-triangle leaves; sbvh: split references).
+    for (const char* spec : {"gen:cylinders?tris=20000&seed=3", "gen:box?tris=3000&seed=4", "gen:surface?tris=5000&seed=2"}) {
+        const FlatScene flat = flatten(load_scene(spec));
+        for (const char* builder : {"binned", "lbvh", "sbvh", "ploc"}) {
+            BuildSettings settings;
+            settings.leaf_block = 4;
+            const Bvh bvh = find_builder(builder).build(BuildInput{flat.triangles, make_prim_refs(flat.triangles)}, settings);
+            INFO(spec << " / " << builder);
+            CHECK(modelled_cost(collapse<4>(bvh, flat.triangles)) <= modelled_cost(collapse<4>(bvh, flat.triangles, CollapseMethod::Greedy)) * (1 + 1e-5));
+            CHECK(modelled_cost(collapse<8>(bvh, flat.triangles)) <= modelled_cost(collapse<8>(bvh, flat.triangles, CollapseMethod::Greedy)) * (1 + 1e-5));
+        }
+    }
 }
