@@ -152,16 +152,20 @@ private:
             return solved;
         }
         Solved left, right;
-        parallel::fork_join(parallel_ && depth < kParallelDepth, 1, [&] { left = solve(node.index, depth + 1); },
+        const bool fork = parallel_ && depth < kParallelDepth;
+        parallel::fork_join(fork ? 1 : 0, 1, [&] { left = solve(node.index, depth + 1); },
                             [&] { right = solve(node.index + 1, depth + 1); });
         Choice& choice = choice_[n];
         Costs shared;
-        for (int k = 2; k <= N; ++k) {
-            shared[k] = std::numeric_limits<float>::infinity();
-            for (int i = 1; i < k; ++i) {
+        for (int k = 2; k <= N; ++k) {  // without branches: which share wins is anyone's guess
+            float best = left.cost[1] + right.cost[k - 1];
+            uint8_t share = 1;
+            for (int i = 2; i < k; ++i) {
                 const float cost = left.cost[i] + right.cost[k - i];
-                if (cost < shared[k]) shared[k] = cost, choice.split[k] = uint8_t(i);
+                share = cost < best ? uint8_t(i) : share;
+                best = std::min(best, cost);
             }
+            shared[k] = best, choice.split[k] = share;
         }
         solved.triangles = std::min(left.triangles + right.triangles, lanes_ + 1);
         const float as_node = area * kNodeTest + shared[N];
