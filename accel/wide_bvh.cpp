@@ -49,9 +49,9 @@ void stream(Block* to, const Block& from) {
 
 inline void stream_fence() { _mm_sfence(); }
 
-// A wide node's children as binary nodes (Ganestam and Doggett 2016, sec. 4.2): the binary node's two children,
-// then repeatedly the inner child of largest surface area (the first of equals) replaced by its two children
-// until there are N.
+// A wide node's children as binary nodes. Greedy (Ganestam and Doggett 2016, sec. 4.2): the binary node's two
+// children, then repeatedly the inner child of largest surface area (the first of equals) replaced by its two
+// children until there are N. Or as a CollapsePlan chose them.
 template <int N>
 class CollapsePlan;
 
@@ -209,12 +209,13 @@ private:
 // second writes the top levels and then replays those subtrees concurrently, each from its own cursor, without
 // opening binary nodes again.
 //
-// With shared blocks, an inner child whose binary subtree is at most a block's lanes of one-triangle leaves is
-// written as one leaf of those triangles, in the subtree's depth-first order: its wide node would hold only
-// those leaves, and a ray that reaches it pays a node test for the box tests the block test makes anyway. On
-// crytek-sponza's LBVH (one triangle per leaf) that is 81% of the BVH8 nodes. The first pass finds such a
-// subtree by a walk that gives up past a block's lanes (or, for an LBVH, from its subtrees' ref ranges), and keeps
-// its refs for the second, which reads them in order and fetches their triangles ahead.
+// The children of each wide node come from a CollapsePlan (the optimal method) or greedily (WideChildren). With
+// shared blocks, an inner child is written as one leaf of its subtree's triangles, in depth-first order, where the
+// plan chose that, or greedily where its subtree is at most a block's lanes of one-triangle leaves: its wide node
+// would hold only those leaves, and a ray that reaches it pays a node test for the box tests the block test makes
+// anyway (on crytek-sponza's LBVH, 81% of the greedy BVH8 nodes). The first pass finds such a subtree's refs by a
+// walk (or, for an LBVH, from its subtrees' ref ranges), and keeps them for the second, which reads them in order
+// and fetches their triangles ahead.
 template <int N, class LeafSink>
 class Collapser {
     static constexpr uint32_t kLanes = uint32_t(block_lanes(N));

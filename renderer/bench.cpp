@@ -65,21 +65,21 @@ std::vector<Entry> make_entries(const Scene& scene, const FlatScene& flat, const
             for (const std::string& kernel : o.kernels)
                 for (const std::string& traversal : o.traversals)
                     for (const std::string& intersector : o.intersectors)
-                    for (const std::string& collapse : o.collapses) {
-                        CanopyOptions options{builder, optimiser_start(builder, o.start), kernel,
-                                              traversal == "robust", intersector == "watertight", toplevel};
-                        options.collapse = parse_collapse_method(collapse);
-                        if (builder != "auto") {
-                            entries.push_back({make_canopy_accelerator(scene, flat, options)});
-                            continue;
+                        for (const std::string& collapse : o.collapses) {
+                            CanopyOptions options{builder, optimiser_start(builder, o.start), kernel,
+                                                  traversal == "robust", intersector == "watertight", toplevel};
+                            options.collapse = parse_collapse_method(collapse);
+                            if (builder != "auto") {
+                                entries.push_back({make_canopy_accelerator(scene, flat, options)});
+                                continue;
+                            }
+                            if (toplevel != o.toplevels.front()) continue;  // auto chooses the top level itself
+                            for (int frames : o.frames_planned) {
+                                CanopyOptions planned = options;
+                                planned.toplevel = "flat", planned.frames_planned = frames, planned.pixels = pixels;
+                                entries.push_back({make_canopy_accelerator(scene, flat, planned)});
+                            }
                         }
-                        if (toplevel != o.toplevels.front()) continue;  // auto chooses the top level itself
-                        for (int frames : o.frames_planned) {
-                            CanopyOptions planned = options;
-                            planned.toplevel = "flat", planned.frames_planned = frames, planned.pixels = pixels;
-                            entries.push_back({make_canopy_accelerator(scene, flat, planned)});
-                        }
-                    }
     const bool two_level = std::any_of(o.toplevels.begin(), o.toplevels.end(), [](const std::string& t) { return t != "flat"; });
     for (const std::string& quality : o.embree_qualities) {
         entries.push_back({make_embree_accelerator(flat, quality, o.threads)});
