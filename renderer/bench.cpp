@@ -1,6 +1,7 @@
 #include "renderer/bench.h"
 
 #include "accel/builder.h"
+#include "kernels/dispatch.h"
 #include "renderer/accelerator.h"
 #include "renderer/dynamic.h"
 
@@ -66,6 +67,8 @@ std::vector<Entry> make_entries(const Scene& scene, const FlatScene& flat, const
                 for (const std::string& traversal : o.traversals)
                     for (const std::string& intersector : o.intersectors)
                         for (const std::string& collapse : o.collapses) {
+                            // A binary layout is the same with every collapse: one row, not a copy of it.
+                            if (collapse != o.collapses.front() && kernel_width(kernel) == 2) continue;
                             CanopyOptions options{builder, optimiser_start(builder, o.start), kernel,
                                                   traversal == "robust", intersector == "watertight", toplevel};
                             options.collapse = parse_collapse_method(collapse);
