@@ -96,8 +96,8 @@ bool node_test_hits(const BBox& box, const Ray& ray, bool robust) {
     else return detail::intersect_children<N>(node, lanes, simd::Simd<N>::set1(tmin), ray.tmax, tnear) & 1;
 }
 
-// Boxes at offsets out to 1e30 and scales from 1e-4 to 1e4 (some flat), rays from afar aimed exactly at a corner, an
-// edge or a face point, and rays with zero direction components whose origin lies in the box's slab, on its planes
+// Boxes at offsets out to 1e30 and scales from 1e-4 to 1e4 (some flat), rays from afar or from near the coordinate
+// origin aimed exactly at a corner, an edge or a face point, and rays with zero direction components whose origin lies in the box's slab, on its planes
 // included. Returns {touching rays, those the node test culls}.
 template <int N>
 std::pair<size_t, size_t> culled_touching_rays(bool robust) {
@@ -116,7 +116,10 @@ std::pair<size_t, size_t> culled_touching_rays(bool robust) {
                 Vec3 target;
                 for (int a = 0; a < 3; ++a) target[a] = unit(rng) < 0.6f ? (unit(rng) < 0.5f ? box.lower[a] : box.upper[a]) : glm::mix(box.lower[a], box.upper[a], unit(rng));
                 const Vec3 away = glm::normalize(Vec3(unit(rng), unit(rng), unit(rng)) - 0.5f);
-                const Vec3 origin = target + (10.0f + 1000.0f * unit(rng)) * scale * away;
+                // Every third ray starts near the coordinate origin, so that for far boxes its distance to the box
+                // dwarfs its origin's magnitude: the padding relative to the distance must hold it alone.
+                const Vec3 origin = i % 3 == 1 ? scale * (Vec3(unit(rng), unit(rng), unit(rng)) - 0.5f)
+                                               : target + (10.0f + 1000.0f * unit(rng)) * scale * away;
                 Ray ray{origin, glm::normalize(target - origin)};
                 if (i % 7 == 0) {  // a zero component, the origin in that axis's slab (on a plane every other time)
                     const int a = i % 3;
