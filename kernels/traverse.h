@@ -26,15 +26,9 @@ namespace canopy {
     return std::max(m.x, std::max(m.y, m.z));
 }
 
-// Robust mode's padding of the slab distances (see SlabRay): far distances scaled up and near ones down by this
-// relative amount, 8 u (u = 2^-24), which covers the three roundings of the distance's product.
-constexpr float kRobustScale = 0x1p-21f;
-// ... plus an absolute pad of this times |org| |inv| per axis, 4 u, twice what the rounding of the addend -org * inv
-// costs.
-constexpr float kRobustOriginPad = 0x1p-22f;
-// ... and, on an axis whose direction component is below kMinSlabDir, a pad of this times R |inv| (R the scene's
-// reach, see SlabRay), which keeps that axis from culling anything in the scene.
-constexpr float kRobustTinyAxisPad = 0x1p-21f;
+// Robust mode's padding of the slab distances, relative to R |inv_dir| (see SlabRay): 8 u, u = 2^-24, twice the
+// rounding bound it covers. 16 u traced the accuracy sphere at offset 1e7 in 546 ns a ray, 8 u in 257.
+constexpr float kRobustPad = 0x1p-21f;
 
 // The smallest direction component the slab test divides by; smaller ones, zeros included, count as this with
 // their sign, so every axis keeps culling (see SlabRay).
@@ -62,35 +56,28 @@ struct TraversalCounts {
 
 namespace detail {
 
-// Per-ray slab data. Every slab distance is one FMA, plane * inv + add, as in Embree's default traversal, with
-// `add` = -org * inv; the near and far planes of each axis are reached by offsets into WideNode::planes chosen once
-// by the direction's sign. Near and far distances have their own reciprocal and addend.
+// Per-ray slab data. Every slab distance is one FMA, plane * inv_dir + add, as in Embree's default traversal,
+// with `add` = -org * inv_dir; the near and far planes of each axis are reached by offsets into
+// WideNode::planes chosen once by the direction's sign.
 //
-// Robust mode (Ize 2013, "Robust BVH Ray Traversal": a box the ray touches is never culled) pads both without a
-// single extra instruction per node, by folding Ize's relative padding into the FMA's constants. Against the exact
-// t = (plane - org) / dir, the far distance fl(plane * inv_far + add_far) with inv_far = fl(fl(1 / dir) s),
-// s = 1 + kRobustScale, and add_far = fl(fl(-org * inv_far) + pad) is
-//   (1 + e1)(1 + e2)(1 + e4) s t - (1 + e4) org inv_far e3' + (1 + e4)(1 + e5) pad,   |e_i| <= u, |e3'| <= 2u + u^2,
-// which is at least t for every t >= 0 when s >= (1 - u)^-3 (kRobustScale = 8 u) and pad >= 4 u |org| |inv_far|
-// (kRobustOriginPad): the product's roundings are relative to t, and only the addend's are not, by a multiple of
-// |org| |inv|. Near distances mirror it (s = 1 - kRobustScale, pad subtracted) and are at most t for t >= 0; for
-// t < 0 they stay below +0 and meet kernel_tmin. A further FLT_MIN of pad covers a result rounded in the subnormal
-// range. So a box widens by 8 u of its distance along the ray plus 4 u |org| per axis: a ray leaving a surface, whose
-// origin is offset from it by more than that (renderer/sampling.h), culls the boxes behind it as the fast mode does.
-// An earlier form padded every distance by 8 u R |inv|, R the reach of the scene and origin, and visited 3.6% more
-// leaves on crytek-sponza's path rays than the fast mode, nearly all of them the box of the surface a ray left.
-//
-// A component under kMinSlabDir (a zero, say) is taken as kMinSlabDir with its sign: that only shrinks the axis's
-// distances, which lowers near ones (conservative), and in robust mode that axis's far distances are padded by
-// kRobustTinyAxisPad R |inv|, R = P + |org| with P the tree's plane bound and |org| the origin's largest magnitude,
-// at least 2^-21 2^64 R, past every point of the scene (within R of the origin on every axis) for a ray whose
-// largest component exceeds 2^-40. An axis whose addends overflow (an origin beyond about 1.8e19 times a tiny
-// component's reciprocal) or are NaN (a NaN direction) is disabled, never culling: reciprocal 0 and addends -inf
-// and +inf give every box (-inf, +inf) on it. So a slab distance is never NaN but an empty slot's inf * 0 on a
-// disabled axis, which culls that slot.
+// Robust mode (Ize 2013's guarantee, "Robust BVH Ray Traversal", by other means) lowers the near planes' addend
+// and raises the far planes' by pad = kRobustPad R |inv_dir|, R = P + |org| with P and |org| the largest
+// magnitudes of the tree's plane coordinates and of the origin's. Against the exact
+// (plane - org) / dir, the FMA form rounds 1/dir, org * inv_dir, the addend and the FMA itself: errors of u times
+// (|plane| + |org|), |org|, |org| + pad and |plane| + |org| + pad, times |inv_dir|, under 4 u R |inv_dir| in all
+// (first order), less than pad, so a box the ray touches is never culled, at any coordinates. Ize's relative
+// padding needs the difference plane - org, a subtraction and a multiplication per slab: this costs one FMA, as
+// the fast mode does. The price: boxes widen by 8 u R in world units, a few float spacings of the scene's
+// coordinates, which slows scenes whose detail is that small, far from the coordinate origin (README, accuracy).
+// A component under kMinSlabDir (a zero, say) is taken as kMinSlabDir: that only shrinks the axis's distances,
+// which lowers near ones (conservative), and its far distances stay above pad >= 2^-21 2^64 R, past every point
+// of the scene (within R of the origin on every axis) for a ray whose largest component exceeds 2^-40. An axis
+// whose addends overflow (an origin or a pad beyond float range: |org| above about 1.8e19) or are NaN (a NaN
+// direction) is disabled, never culling: inv_dir 0 and addends -inf and +inf give every box (-inf, +inf) on it.
+// So a slab distance is never NaN but an empty slot's inf * 0 on a disabled axis, which culls that slot.
 template <int N>
 struct SlabRay {
-    Vec3 inv_near, inv_far, near_add, far_add;
+    Vec3 inv_dir, near_add, far_add;
     int near[3], far[3];
 
     // In SSE lanes x, y, z: one division for the three reciprocals, no branches.
@@ -99,41 +86,31 @@ struct SlabRay {
         const __m128 dir = _mm_setr_ps(ray.dir.x, ray.dir.y, ray.dir.z, 1.0f);
         const __m128 org = _mm_setr_ps(ray.org.x, ray.org.y, ray.org.z, 0.0f);
         // |dir| raised to kMinSlabDir with dir's sign; a NaN stays NaN (max returns its second operand then).
-        const __m128 abs_dir = _mm_andnot_ps(sign, dir);
-        const __m128 magnitude = _mm_max_ps(_mm_set1_ps(kMinSlabDir), abs_dir);
+        const __m128 magnitude = _mm_max_ps(_mm_set1_ps(kMinSlabDir), _mm_andnot_ps(sign, dir));
         const __m128 safe_dir = _mm_or_ps(magnitude, _mm_and_ps(sign, dir));
         const __m128 inv = _mm_div_ps(_mm_set1_ps(1.0f), safe_dir);
-        __m128 inv_n = inv, inv_f = inv, pad_n = _mm_setzero_ps(), pad_f = _mm_setzero_ps();
+        const __m128 add = _mm_xor_ps(_mm_mul_ps(org, inv), sign);
+        __m128 pad = _mm_setzero_ps();
         if (robust) {
-            inv_n = _mm_mul_ps(inv, _mm_set1_ps(1.0f - kRobustScale));
-            inv_f = _mm_mul_ps(inv, _mm_set1_ps(1.0f + kRobustScale));
             const __m128 abs_org = _mm_andnot_ps(sign, org);
-            const __m128 origin_pad = _mm_mul_ps(_mm_set1_ps(kRobustOriginPad), abs_org);
-            const __m128 smallest = _mm_set1_ps(std::numeric_limits<float>::min());
-            pad_n = _mm_add_ps(_mm_mul_ps(origin_pad, _mm_andnot_ps(sign, inv_n)), smallest);
-            pad_f = _mm_add_ps(_mm_mul_ps(origin_pad, _mm_andnot_ps(sign, inv_f)), smallest);
             const __m128 yz = _mm_max_ps(_mm_movehdup_ps(abs_org), _mm_movehl_ps(abs_org, abs_org));
             const __m128 org_max = _mm_max_ps(abs_org, yz);  // lane 0: the largest |org| component
-            const __m128 reach = _mm_add_ps(_mm_set1_ps(plane_bound), _mm_broadcastss_ps(org_max));
-            const __m128 tiny_pad = _mm_mul_ps(_mm_mul_ps(_mm_set1_ps(kRobustTinyAxisPad), reach), _mm_andnot_ps(sign, inv_f));
-            const __m128 tiny = _mm_cmplt_ps(abs_dir, _mm_set1_ps(kMinSlabDir));  // false on NaN
-            pad_n = _mm_blendv_ps(pad_n, tiny_pad, tiny);
-            pad_f = _mm_blendv_ps(pad_f, tiny_pad, tiny);
+            const __m128 r = _mm_add_ps(_mm_set1_ps(plane_bound), _mm_broadcastss_ps(org_max));
+            const __m128 reach = _mm_mul_ps(_mm_set1_ps(kRobustPad), r);
+            pad = _mm_mul_ps(reach, _mm_andnot_ps(sign, inv));
         }
-        const __m128 lower = _mm_sub_ps(_mm_xor_ps(_mm_mul_ps(org, inv_n), sign), pad_n);
-        const __m128 upper = _mm_add_ps(_mm_xor_ps(_mm_mul_ps(org, inv_f), sign), pad_f);
+        const __m128 lower = _mm_sub_ps(add, pad), upper = _mm_add_ps(add, pad);
         const __m128 largest = _mm_set1_ps(std::numeric_limits<float>::max());
         const __m128 usable = _mm_and_ps(_mm_cmple_ps(_mm_andnot_ps(sign, lower), largest),
                                          _mm_cmple_ps(_mm_andnot_ps(sign, upper), largest));  // false on inf, NaN
         const __m128 infinity = _mm_set1_ps(std::numeric_limits<float>::infinity());
-        alignas(16) float lanes[4][4];
-        _mm_store_ps(lanes[0], _mm_and_ps(inv_n, usable));
-        _mm_store_ps(lanes[1], _mm_and_ps(inv_f, usable));
-        _mm_store_ps(lanes[2], _mm_blendv_ps(_mm_xor_ps(infinity, sign), lower, usable));
-        _mm_store_ps(lanes[3], _mm_blendv_ps(infinity, upper, usable));
+        alignas(16) float lanes[3][4];
+        _mm_store_ps(lanes[0], _mm_and_ps(inv, usable));
+        _mm_store_ps(lanes[1], _mm_blendv_ps(_mm_xor_ps(infinity, sign), lower, usable));
+        _mm_store_ps(lanes[2], _mm_blendv_ps(infinity, upper, usable));
         const int negative = _mm_movemask_ps(inv);
         for (int a = 0; a < 3; ++a) {
-            inv_near[a] = lanes[0][a], inv_far[a] = lanes[1][a], near_add[a] = lanes[2][a], far_add[a] = lanes[3][a];
+            inv_dir[a] = lanes[0][a], near_add[a] = lanes[1][a], far_add[a] = lanes[2][a];
             const int flip = (negative >> a & 1) * 3 * N;
             near[a] = flip + a * N;
             far[a] = 3 * N - flip + a * N;
@@ -145,13 +122,12 @@ struct SlabRay {
 template <int N>
 struct SlabLanes {
     using S = simd::Simd<N>;
-    typename S::F inv_near[3], inv_far[3], near_add[3], far_add[3];
+    typename S::F inv[3], near_add[3], far_add[3];
     int near[3], far[3];
 
     [[gnu::always_inline]] explicit SlabLanes(const SlabRay<N>& r) {
         for (int a = 0; a < 3; ++a) {
-            inv_near[a] = S::set1(r.inv_near[a]), inv_far[a] = S::set1(r.inv_far[a]);
-            near_add[a] = S::set1(r.near_add[a]), far_add[a] = S::set1(r.far_add[a]);
+            inv[a] = S::set1(r.inv_dir[a]), near_add[a] = S::set1(r.near_add[a]), far_add[a] = S::set1(r.far_add[a]);
             near[a] = r.near[a], far[a] = r.far[a];
         }
     }
@@ -177,8 +153,8 @@ template <int N>
     for (int i = 0; i < N; ++i) {
         int32_t t0 = distance_bits(tmin), t1 = distance_bits(tmax);
         for (int a = 0; a < 3; ++a) {
-            t0 = std::max(t0, distance_bits(std::fma(planes[r.near[a] + i], r.inv_near[a], r.near_add[a])));
-            t1 = std::min(t1, distance_bits(std::fma(planes[r.far[a] + i], r.inv_far[a], r.far_add[a])));
+            t0 = std::max(t0, distance_bits(std::fma(planes[r.near[a] + i], r.inv_dir[a], r.near_add[a])));
+            t1 = std::min(t1, distance_bits(std::fma(planes[r.far[a] + i], r.inv_dir[a], r.far_add[a])));
         }
         tnear[i] = std::bit_cast<float>(t0);
         mask |= uint32_t(t0 <= t1) << i;
@@ -197,8 +173,8 @@ template <int N>
     const float* planes = node.planes;
     F x[3], y[3];  // near and far distances per axis
     for (int a = 0; a < 3; ++a) {
-        x[a] = S::fmadd(S::load(planes + r.near[a]), r.inv_near[a], r.near_add[a]);
-        y[a] = S::fmadd(S::load(planes + r.far[a]), r.inv_far[a], r.far_add[a]);
+        x[a] = S::fmadd(S::load(planes + r.near[a]), r.inv[a], r.near_add[a]);
+        y[a] = S::fmadd(S::load(planes + r.far[a]), r.inv[a], r.far_add[a]);
     }
     const F t_max = S::set1(tmax);
     const F t0 = S::max_bits(S::max_bits(x[1], tmin), S::max_bits(x[2], S::max_bits(x[0], tmin)));
