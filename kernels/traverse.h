@@ -15,15 +15,23 @@
 #include <array>
 #include <bit>
 #include <limits>
-#include <optional>
+#include <new>
+#include <type_traits>
 
 namespace canopy {
 
 // A bound on the magnitude of every plane coordinate of a tree, from a box holding all of its boxes (a tree's
 // root box: every builder's boxes nest, which the builder tests check).
+// In SSE lanes, as every ray computes it: glm::abs compiled to a compare and a blend per coordinate.
 [[gnu::always_inline]] inline float plane_bound(const BBox& bounds) {
-    const Vec3 m = glm::max(glm::abs(bounds.lower), glm::abs(bounds.upper));
-    return std::max(m.x, std::max(m.y, m.z));
+    static_assert(sizeof(BBox) == 6 * sizeof(float));
+    const float* coordinates = &bounds.lower.x;  // lower x, y, z, upper x, y, z
+    const __m128 sign = _mm_set1_ps(-0.0f);
+    const __m128 first = _mm_andnot_ps(sign, _mm_loadu_ps(coordinates));     // lower x, y, z, upper x
+    const __m128 last = _mm_andnot_ps(sign, _mm_loadu_ps(coordinates + 2));  // lower z, upper x, y, z
+    const __m128 m = _mm_max_ps(first, last);
+    const __m128 m2 = _mm_max_ps(m, _mm_movehl_ps(m, m));
+    return _mm_cvtss_f32(_mm_max_ss(m2, _mm_movehdup_ps(m2)));
 }
 
 // Robust mode's padding of the slab distances, relative to R |inv_dir| (see SlabRay): 8 u, u = 2^-24, twice the
@@ -223,6 +231,30 @@ template <int N, class TriangleTest, class Counter>
     return found;
 }
 
+// A triangle test set up on first use, constructed in place: std::optional's emplace left GCC an out-of-line
+// std::_Construct call for it (0.5% of a crytek-sponza frame's samples on its own).
+template <class TriangleTest>
+class LazyTest {
+    static_assert(std::is_trivially_destructible_v<TriangleTest>);
+
+public:
+    LazyTest() {}
+    [[gnu::always_inline]] void set(const Ray& ray) {
+        new (&test_) TriangleTest(ray);
+        ready_ = true;
+    }
+    [[gnu::always_inline]] const TriangleTest& get(const Ray& ray) {
+        if (!ready_) set(ray);
+        return test_;
+    }
+
+private:
+    union {
+        TriangleTest test_;
+    };
+    bool ready_ = false;
+};
+
 // The per-ray form the node test of width N takes: SlabRay itself for the scalar BVH2 test, else SlabLanes.
 template <int N>
 using NodeRay = std::conditional_t<N == 2, SlabRay<N>, SlabLanes<N>>;
@@ -315,11 +347,10 @@ template <Query Q, bool Robust = true, class TriangleTest = WatertightRay, int N
     // rays from outside reach none. Set up always, crytek-sponza bvh8 frames took 1.042x Embree MEDIUM's against
     // 1.076x set up at the first leaf, but stanford-bunny's 1.083x against 1.044x; gated this way, 1.049x against
     // 1.083x and 1.032x against 1.038x (another batch; means of four alternating runs each).
-    std::optional<TriangleTest> tri_ray;
-    if (bvh.bounds.contains(ray.org)) tri_ray.emplace(ray);
+    detail::LazyTest<TriangleTest> tri_ray;
+    if (bvh.bounds.contains(ray.org)) tri_ray.set(ray);
     detail::traverse_from<Q>(bvh, {0, 0, tmin}, box_ray, tmin, hit, counter, [&](const detail::StackEntry& leaf) {
-        if (!tri_ray) tri_ray.emplace(ray);
-        return detail::intersect_leaf(bvh, leaf, *tri_ray, tmin, hit, counter);
+        return detail::intersect_leaf(bvh, leaf, tri_ray.get(ray), tmin, hit, counter);
     });
     return hit.found();
 }

@@ -8,7 +8,6 @@
 #include "accel/two_level.h"
 #include "kernels/traverse.h"
 
-#include <optional>
 
 namespace canopy {
 namespace detail {
@@ -46,12 +45,10 @@ template <Query Q, bool Robust, class TriangleTest, int N, class Counter, class 
             // setup waits for a leaf: most entries miss every box below them (zoo-64: of 1.9 entries a ray, 0.84
             // reach a leaf; frames 3% faster).
             const Ray local{instance.point(ray.org), instance.vector(ray.dir), tmin, hit.t};
-            std::optional<TriangleTest> local_tri;
+            LazyTest<TriangleTest> local_tri;
             const SlabRay<N> local_box(local, plane_bound(bvh.objects[instance.object].bounds), Robust);
-            here = enter_object<Q>(bvh.pool, entry, local_box, [&]() -> const TriangleTest& {
-                if (!local_tri) local_tri.emplace(local);
-                return *local_tri;
-            }, tmin, hit, counter);
+            here = enter_object<Q>(bvh.pool, entry, local_box, [&]() -> const TriangleTest& { return local_tri.get(local); },
+                                   tmin, hit, counter);
         }
         if (here) hit.prim += instance.prim_offset;
         found |= here;
@@ -69,11 +66,8 @@ template <Query Q, bool Robust = true, class TriangleTest = WatertightRay, int N
     hit.t = ray.tmax;
     if (bvh.brefs == 0) return false;
     const detail::SlabRay<N> world_box(ray, plane_bound(bvh.bounds), Robust);
-    std::optional<TriangleTest> world_test;  // set up at the first leaf the world ray reaches, as in the flat kernel
-    const auto world_tri = [&]() -> const TriangleTest& {
-        if (!world_test) world_test.emplace(ray);
-        return *world_test;
-    };
+    detail::LazyTest<TriangleTest> world_test;  // set up at the first leaf the world ray reaches, as in the flat kernel
+    const auto world_tri = [&]() -> const TriangleTest& { return world_test.get(ray); };
     const float tmin = kernel_tmin(ray);
     const detail::StackEntry root{bvh.root, 0, tmin};
     detail::traverse_from<Q>(bvh.pool, root, world_box, tmin, hit, counter, [&](const detail::StackEntry& leaf) {
