@@ -21,8 +21,8 @@
 namespace canopy {
 
 // A bound on the magnitude of every plane coordinate of a tree, from a box holding all of its boxes (a tree's
-// root box: every builder's boxes nest, which the builder tests check).
-// In SSE lanes, as every ray computes it: glm::abs compiled to a compare and a blend per coordinate.
+// root box: every builder's boxes nest, which the builder tests check). In SSE lanes, since every ray computes it
+// (glm::abs compiled to a compare and a blend per coordinate).
 [[gnu::always_inline]] inline float plane_bound(const BBox& bounds) {
     static_assert(sizeof(BBox) == 6 * sizeof(float));
     const float* coordinates = &bounds.lower.x;  // lower x, y, z, upper x, y, z

@@ -8,7 +8,6 @@
 #include "accel/two_level.h"
 #include "kernels/traverse.h"
 
-
 namespace canopy {
 namespace detail {
 

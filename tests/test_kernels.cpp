@@ -97,8 +97,8 @@ bool node_test_hits(const BBox& box, const Ray& ray, bool robust) {
 }
 
 // Boxes at offsets out to 1e30 and scales from 1e-4 to 1e4 (some flat), rays from afar or from near the coordinate
-// origin aimed exactly at a corner, an edge or a face point, and rays with zero direction components whose origin lies in the box's slab, on its planes
-// included. Returns {touching rays, those the node test culls}.
+// origin aimed exactly at a corner, an edge or a face point, and rays with zero direction components whose origin
+// lies in the box's slab, on its planes included. Returns {touching rays, those the node test culls}.
 template <int N>
 std::pair<size_t, size_t> culled_touching_rays(bool robust) {
     std::mt19937_64 rng(77);
@@ -117,7 +117,8 @@ std::pair<size_t, size_t> culled_touching_rays(bool robust) {
                 for (int a = 0; a < 3; ++a) target[a] = unit(rng) < 0.6f ? (unit(rng) < 0.5f ? box.lower[a] : box.upper[a]) : glm::mix(box.lower[a], box.upper[a], unit(rng));
                 const Vec3 away = glm::normalize(Vec3(unit(rng), unit(rng), unit(rng)) - 0.5f);
                 // Every third ray starts near the coordinate origin, so that for far boxes its distance to the box
-                // dwarfs its origin's magnitude: the padding relative to the distance must hold it alone.
+                // dwarfs its origin's magnitude: the padding must cover the rounding of the distance itself, not
+                // only of the origin's terms.
                 const Vec3 origin = i % 3 == 1 ? scale * (Vec3(unit(rng), unit(rng), unit(rng)) - 0.5f)
                                                : target + (10.0f + 1000.0f * unit(rng)) * scale * away;
                 Ray ray{origin, glm::normalize(target - origin)};
