@@ -15,8 +15,9 @@ struct SbvhSettings {
 };
 
 // Split BVH (Stich, Friedrich and Dietrich 2009): top-down, at each node the cheaper of the best binned object
-// split and the best binned spatial split (on the node's largest axis, see sbvh.cpp), whose straddling references are clipped to the plane (exact bounds,
-// accel/triangle_clipping.h) or kept whole on one side where that is cheaper (Stich et al.'s reference unsplitting).
+// split and the best binned spatial split on any axis, whose straddling references are clipped to the plane
+// (exact bounds, accel/triangle_clipping.h) or kept whole on one side where that is cheaper (Stich et al.'s
+// reference unsplitting).
 // Parallel over subtrees; the tree does not depend on the number of threads.
 Bvh build_sbvh_with(BuildInput&& input, const BuildSettings& settings, const SbvhSettings& sbvh);
 Bvh build_sbvh(BuildInput&& input, const BuildSettings& settings);
