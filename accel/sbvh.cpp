@@ -176,12 +176,12 @@ private:
     NodeInfo info_of(const Extent& e) const {
         const NodeInfo none{Box4::empty(), Box4::empty()};
         auto chunk = [&](size_t b, size_t end) {
-            NodeInfo info = none;
+            Box4 bounds = Box4::empty(), centroids = Box4::empty();  // locals: GCC kept a NodeInfo in memory
             for (size_t i = e.begin + b; i < e.begin + end; ++i) {
-                info.bounds.extend(Box4::of(refs_[i]));
-                info.centroids.extend(sah_binning::center2(refs_[i]));
+                bounds.extend(Box4::of(refs_[i]));
+                centroids.extend(sah_binning::center2(refs_[i]));
             }
-            return info;
+            return NodeInfo{bounds, centroids};
         };
         auto join = [](NodeInfo a, const NodeInfo& b) {
             a.bounds.extend(b.bounds);
@@ -197,7 +197,8 @@ private:
         const uint32_t n = e.count;
         const float area = info.bounds.half_area();
         if (n > 1 && depth < kMedianFallbackDepth) {
-            Candidate object = best_object_split(e, info);
+            const sah_binning::BinMapping mapping(info.centroids, object_bins(n));
+            Candidate object = best_object_split(e, mapping);
             Candidate spatial;
             // Stich et al.: spatial splits only where the object split leaves overlap, and only within the memory cap.
             BBox overlap = object.left;
@@ -211,7 +212,7 @@ private:
             if (best.axis >= 0 && !leaf_is_cheaper) {
                 if (use_spatial && split_spatially(e, spatial, bounds, node, descendants, depth)) return;
                 if (object.axis >= 0) {
-                    split_by_objects(e, object, info, node, descendants, depth);
+                    split_by_objects(e, object, mapping, bounds, node, descendants, depth);
                     return;
                 }
             }
@@ -227,8 +228,7 @@ private:
     // Binned SAH over the references' centroids, as the binned builder does (accel/sah_binning.h).
     uint32_t object_bins(uint32_t n) const { return std::min(object_bins_, std::max(n, 4u)); }
 
-    Candidate best_object_split(const Extent& e, const NodeInfo& info) const {
-        const sah_binning::BinMapping mapping(info.centroids, object_bins(e.count));
+    Candidate best_object_split(const Extent& e, const sah_binning::BinMapping& mapping) const {
         const sah_binning::Split split =
             sah_binning::best_split(sah_binning::bin_refs(refs_.data(), e.begin, e.count, mapping), mapping.bins, settings_);
         if (split.axis < 0) return {};
@@ -248,20 +248,32 @@ private:
         const std::array<AxisBins, 3> maps = {AxisBins(bounds.lower.x, bounds.upper.x, bins),
                                               AxisBins(bounds.lower.y, bounds.upper.y, bins),
                                               AxisBins(bounds.lower.z, bounds.upper.z, bins)};
+        // AxisBins::bin on the three axes at once, in the same arithmetic (so split_spatially's bins agree).
+        const __m128 origin = _mm_setr_ps(maps[0].origin, maps[1].origin, maps[2].origin, 0.0f);
+        const __m128 scale = _mm_setr_ps(maps[0].scale, maps[1].scale, maps[2].scale, 0.0f);
+        const __m128i top = _mm_set1_epi32(int(bins) - 1);
+        auto bin3 = [&](__m128 p) {
+            const __m128i b = _mm_cvttps_epi32(_mm_mul_ps(_mm_sub_ps(p, origin), scale));
+            return _mm_min_epi32(_mm_max_epi32(b, _mm_setzero_si128()), top);
+        };
         auto chunk = [&](size_t b, size_t end) {
             Axes axes;
+            alignas(16) int32_t first[4], last[4];
             for (size_t i = e.begin + b; i < e.begin + end; ++i) {
                 const PrimRef& ref = refs_[i];
                 const Box4 piece = Box4::of(ref);
+                const __m128i f = bin3(piece.lower), l = bin3(piece.upper);
+                _mm_store_si128(reinterpret_cast<__m128i*>(first), f);
+                _mm_store_si128(reinterpret_cast<__m128i*>(last), l);
+                const int same = _mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(f, l)));
                 for (int axis = 0; axis < 3; ++axis) {
-                    const uint32_t first = maps[axis].bin(ref.lower[axis]), last = maps[axis].bin(ref.upper[axis]);
                     SpatialAxis& out = axes[axis];
-                    if (first == last) {  // most references, in all but the top levels: no clipping
-                        out.bounds[first].extend(piece);
-                        ++out.entries[first];
-                        ++out.exits[first];
+                    if (same >> axis & 1) {  // most references, in all but the top levels: no clipping
+                        out.bounds[first[axis]].extend(piece);
+                        ++out.entries[first[axis]];
+                        ++out.exits[first[axis]];
                     } else {
-                        bin_chopped(triangles_[ref.prim], piece, axis, maps[axis], first, last, out);
+                        bin_chopped(triangles_[ref.prim], piece, axis, maps[axis], uint32_t(first[axis]), uint32_t(last[axis]), out);
                     }
                 }
             }
@@ -278,15 +290,14 @@ private:
         return best;
     }
 
-    void split_by_objects(const Extent& e, const Candidate& split, const NodeInfo& info, uint32_t node,
+    void split_by_objects(const Extent& e, const Candidate& split, const sah_binning::BinMapping& mapping, const BBox& bounds, uint32_t node,
                           uint32_t descendants, uint32_t depth) {
-        const sah_binning::BinMapping mapping(info.centroids, object_bins(e.count));
         PrimRef* first = refs_.data() + e.begin;
         PrimRef* middle = std::partition(first, first + e.count, [&](const PrimRef& r) {
             return mapping.bin(sah_binning::center2(r), split.axis) < split.plane;
         });
         const auto left = uint32_t(middle - first);
-        emit_children(e, left, e.count - left, true, info.bounds.bbox(), node, descendants, depth);
+        emit_children(e, left, e.count - left, true, bounds, node, descendants, depth);
     }
 
     enum class Side : uint8_t { left, right, both };
@@ -388,7 +399,9 @@ Bvh build_sbvh_with(BuildInput&& input, const BuildSettings& settings, const Sbv
     BBox root;
     for (const PrimRef& r : input.refs) root.extend(r.bounds());
     input.refs.resize(size_t(slots));
-    SbvhBuilder builder(input.triangles, input.refs, settings, sbvh, root.half_area());
+    BuildSettings priced = settings;
+    priced.leaf_block = std::max(sbvh.leaf_block, 1u);
+    SbvhBuilder builder(input.triangles, input.refs, priced, sbvh, root.half_area());
     Bvh bvh = builder.build(triangles);
     // Spatial splitting is interleaved with partitioning, not a pass of its own, so no split time is reported;
     // the capacity is the reference array allocated up front.

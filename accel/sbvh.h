@@ -12,6 +12,10 @@ struct SbvhSettings {
     // where the share is used up only object splits remain. 2 bounds the reference array at twice binned SAH's,
     // above the 20-50% increase SBVH makes on typical scenes (Ganestam and Doggett 2016, Table 3).
     float max_references_per_triangle = 2.0f;
+    // Triangles a leaf test is charged per, whatever the kernel's block: 1, so that leaves of a few triangles
+    // split on where their boxes shrink (spatially, down to single triangles), and the wide layout's collapse
+    // groups the pieces back into full blocks by its own cost (README, split builders).
+    uint32_t leaf_block = 1;
 };
 
 // Split BVH (Stich, Friedrich and Dietrich 2009): top-down, at each node the cheaper of the best binned object
