@@ -3,6 +3,7 @@
 #include "accel/parallel.h"
 #include "accel/sah_binning.h"
 #include "accel/sparse_tree.h"
+#include "accel/spatial_binning.h"
 #include "accel/triangle_clipping.h"
 
 #include <array>
@@ -14,11 +15,13 @@ namespace canopy {
 namespace {
 
 using sah_binning::Box4;
+using spatial_binning::AxisBins;
+using spatial_binning::SpatialAxis;
 
 // Spatial bins per axis. Clipping a reference into every bin it spans is the expensive part of SBVH: 12 bins on
 // each of the three axes, as Stich et al. bin them. On crytek-sponza the largest axis alone built 1.9x faster but
 // its trees tested 5% more nodes and 3% more leaves a ray (bvh8 frames 1.078x Embree HIGH's against 1.014x).
-constexpr uint32_t kSpatialBins = 12;
+constexpr uint32_t kSpatialBins = spatial_binning::kMaxBins;
 constexpr size_t kParallelBinningGrain = sah_binning::kParallelGrain;
 constexpr size_t kParallelSubtreeGrain = 4 * 1024;
 
@@ -40,93 +43,8 @@ struct NodeInfo {
     Box4 bounds, centroids;  // centroids of doubled centres (PrimRef::center2)
 };
 
-// Maps a coordinate to one of `bins` intervals over [lower, upper] of one axis, the same way everywhere.
-struct AxisBins {
-    float origin = 0, scale = 0, width = 0;
-    uint32_t bins = 1;
-
-    AxisBins(float lower, float upper, uint32_t n)
-        : origin(lower), scale(upper > lower ? float(n) * 0.99999f / (upper - lower) : 0.0f),
-          width((upper - lower) / float(n)), bins(n) {}
-    uint32_t bin(float x) const { return std::min(uint32_t(std::max((x - origin) * scale, 0.0f)), bins - 1); }
-    float plane(uint32_t i) const { return origin + float(i) * width; }
-};
-
-// One axis's spatial bins: each bin's box and how many references enter (start in) and leave (end in) it.
-struct SpatialAxis {
-    std::array<Box4, kSpatialBins> bounds;
-    std::array<uint32_t, kSpatialBins> entries{}, exits{};
-
-    SpatialAxis() { bounds.fill(Box4::empty()); }
-    void add(const SpatialAxis& o) {
-        for (uint32_t i = 0; i < kSpatialBins; ++i) {
-            bounds[i].extend(o.bounds[i]);
-            entries[i] += o.entries[i];
-            exits[i] += o.exits[i];
-        }
-    }
-};
-
-inline __m128 load_point(const Vec3& p) { return _mm_setr_ps(p.x, p.y, p.z, 0.0f); }
-
-// Where edge a-b crosses the plane at `position` on `axis` (lane mask `on_axis`), in float: an estimate, for
-// pricing splits only (the split itself clips exactly). The edge's parameter is clamped to [0, 1], so a plane
-// that rounding puts just outside the edge, or a NaN from a flat edge, gives an end point, never a NaN.
-inline __m128 edge_crossing(__m128 a, __m128 b, float a_axis, float b_axis, float position, __m128 on_axis) {
-    const float t = (position - a_axis) / (b_axis - a_axis);
-    const float s = t > 0.0f ? (t < 1.0f ? t : 1.0f) : 0.0f;
-    const __m128 p = _mm_add_ps(a, _mm_mul_ps(_mm_set1_ps(s), _mm_sub_ps(b, a)));
-    return _mm_blendv_ps(p, _mm_set1_ps(position), on_axis);
-}
-
-// Stich et al.'s chopped binning of one reference on one axis: the part of its triangle in each bin it spans,
-// clipped to the reference's box, extends that bin. A part's box is that of the triangle's vertices in the bin
-// (the vertices beyond the reference's first and last bins count as in them, and the clip trims them) and of
-// the crossings of the triangle's edges with the bin's two planes. Each plane is crossed by the edge from the
-// lowest to the highest vertex and by one of the other two, and its crossings serve the bins on both sides.
-inline void bin_chopped(const Triangle& triangle, const Box4& piece, int axis, const AxisBins& map, uint32_t first,
-                        uint32_t last, SpatialAxis& out) {
-    struct Vertex {
-        __m128 p;
-        float c;  // coordinate on the axis
-        uint32_t bin;
-    };
-    Vertex v[3];
-    const Vec3* corners[3] = {&triangle.v0, &triangle.v1, &triangle.v2};
-    for (int i = 0; i < 3; ++i) {
-        const float c = (*corners[i])[axis];
-        v[i] = {load_point(*corners[i]), c, std::clamp(map.bin(c), first, last)};
-    }
-    if (v[1].c < v[0].c) std::swap(v[0], v[1]);
-    if (v[2].c < v[1].c) std::swap(v[1], v[2]);
-    if (v[1].c < v[0].c) std::swap(v[0], v[1]);
-    alignas(16) int32_t lanes[4] = {0, 0, 0, 0};
-    lanes[axis] = -1;
-    const __m128 on_axis = _mm_load_ps(reinterpret_cast<const float*>(lanes));
-    Box4 part = Box4::empty();
-    for (uint32_t k = first;; ++k) {
-        for (const Vertex& vertex : v)
-            if (vertex.bin == k) part.extend(vertex.p);
-        Box4 next = Box4::empty();
-        if (k < last) {
-            const float position = map.plane(k + 1);
-            const Vertex& low = v[0];
-            const Vertex& high = v[2];
-            const Vertex& other = position < v[1].c ? v[0] : v[2];
-            next.extend(edge_crossing(low.p, high.p, low.c, high.c, position, on_axis));
-            next.extend(edge_crossing(v[1].p, other.p, v[1].c, other.c, position, on_axis));
-            part.extend(next);
-        }
-        part = {_mm_max_ps(part.lower, piece.lower), _mm_min_ps(part.upper, piece.upper)};
-        if (part.valid()) out.bounds[k].extend(part);
-        if (k == last) break;
-        part = next;
-    }
-    ++out.entries[first];
-    ++out.exits[last];
-}
-
-// Sweeps the planes between bins: left side from entries (object bins: everything), right side from exits.
+// Sweeps the planes between one axis's spatial bins: a side holds the references that enter a bin left of the
+// plane, and those that leave one right of it.
 void sweep(const SpatialAxis& bins, uint32_t n, int axis, const BuildSettings& settings, Candidate& best) {
     std::array<Box4, kSpatialBins> right_box;
     std::array<uint32_t, kSpatialBins> right_n{};
@@ -235,10 +153,9 @@ private:
         return {split.cost, split.axis, split.bin, split.left.bbox(), split.right.bbox(), split.left_count, split.right_count};
     }
 
-    // Stich et al.: spatial bins over the node's bounds on each axis; each reference is chopped into every bin it
-    // spans (bin_chopped) and counted as entering its first bin and leaving its last. The bins only price splits,
-    // so they clip with float crossings: exact clipping took 28% of a conference build, and the trees came out
-    // the same (split_spatially clips references exactly).
+    // Stich et al.: spatial bins over the node's bounds on each axis, a reference that spans several chopped into
+    // them (accel/spatial_binning.h). The bins only price splits, so they are computed in float: exact clipping took
+    // 28% of a conference build, and the trees came out the same (split_spatially clips references exactly).
     // As for object bins, small nodes get fewer: a bin per reference is enough.
     static uint32_t spatial_bins(uint32_t n) { return std::clamp<uint32_t>(n, 4, kSpatialBins); }
 
@@ -273,7 +190,7 @@ private:
                         ++out.entries[first[axis]];
                         ++out.exits[first[axis]];
                     } else {
-                        bin_chopped(triangles_[ref.prim], piece, axis, maps[axis], uint32_t(first[axis]), uint32_t(last[axis]), out);
+                        spatial_binning::bin_chopped(triangles_[ref.prim], piece, axis, maps[axis], uint32_t(first[axis]), uint32_t(last[axis]), out);
                     }
                 }
             }

@@ -39,22 +39,9 @@ inline BBox edge_plane_crossing(const Vec3& a, const Vec3& b, int axis, float po
     return crossing;
 }
 
-// The same point in float arithmetic, not widened: it may miss the exact crossing by a few ulps. For estimates
-// only (SBVH's spatial binning, whose boxes price a split and bound nothing): a third of the double form's cost.
-inline BBox edge_plane_crossing_estimate(const Vec3& a, const Vec3& b, int axis, float position) {
-    const float s = (position - a[axis]) / (b[axis] - a[axis]);
-    Vec3 p = a + s * (b - a);
-    p[axis] = position;
-    return {p, p};
-}
-
-enum class Clipping { Exact, Estimate };
-
 // The boxes of the parts of `triangle` on each side of the plane, each intersected with `piece` (the bounds of
 // the reference being split, which may already be a clipped part of the triangle). A side the triangle does not
-// reach comes back empty. The left box ends at the plane and the right one starts there. Clipping::Estimate
-// computes edge crossings in float (edge_plane_crossing_estimate): its boxes may miss the piece by a few ulps.
-template <Clipping C = Clipping::Exact>
+// reach comes back empty. The left box ends at the plane and the right one starts there.
 inline std::pair<BBox, BBox> split_triangle_bounds(const Triangle& triangle, const BBox& piece, int axis, float position) {
     const Vec3 v[3] = {triangle.v0, triangle.v1, triangle.v2};
     BBox left, right;
@@ -64,8 +51,7 @@ inline std::pair<BBox, BBox> split_triangle_bounds(const Triangle& triangle, con
         if (a[axis] <= position) left.extend(a);
         if (a[axis] >= position) right.extend(a);
         if ((a[axis] < position && b[axis] > position) || (a[axis] > position && b[axis] < position)) {
-            const BBox crossing = C == Clipping::Exact ? edge_plane_crossing(a, b, axis, position)
-                                                       : edge_plane_crossing_estimate(a, b, axis, position);
+            const BBox crossing = edge_plane_crossing(a, b, axis, position);
             left.extend(crossing);
             right.extend(crossing);
         }
