@@ -45,7 +45,8 @@ struct Bin {
     void add(const Bin& b) { bounds.extend(b.bounds); count += b.count; }
 };
 
-// Maps doubled centroids to bins, the same way in binning and in partitioning.
+// Maps points of a box (doubled centroids, for object bins) to `bins` intervals per axis, the same way in binning
+// and in partitioning.
 struct BinMapping {
     __m128 origin, scale;
     uint32_t bins;

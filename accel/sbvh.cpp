@@ -43,8 +43,8 @@ struct NodeInfo {
     Box4 bounds, centroids;  // centroids of doubled centres (PrimRef::center2)
 };
 
-// Sweeps the planes between one axis's spatial bins: a side holds the references that enter a bin left of the
-// plane, and those that leave one right of it.
+// Sweeps the planes between one axis's spatial bins: the left side holds the references that enter a bin left of
+// the plane, the right side those that leave one right of it.
 void sweep(const SpatialAxis& bins, uint32_t n, int axis, const BuildSettings& settings, Candidate& best) {
     std::array<Box4, kSpatialBins> right_box;
     std::array<uint32_t, kSpatialBins> right_n{};
@@ -165,21 +165,15 @@ private:
         const std::array<AxisBins, 3> maps = {AxisBins(bounds.lower.x, bounds.upper.x, bins),
                                               AxisBins(bounds.lower.y, bounds.upper.y, bins),
                                               AxisBins(bounds.lower.z, bounds.upper.z, bins)};
-        // AxisBins::bin on the three axes at once, in the same arithmetic (so split_spatially's bins agree).
-        const __m128 origin = _mm_setr_ps(maps[0].origin, maps[1].origin, maps[2].origin, 0.0f);
-        const __m128 scale = _mm_setr_ps(maps[0].scale, maps[1].scale, maps[2].scale, 0.0f);
-        const __m128i top = _mm_set1_epi32(int(bins) - 1);
-        auto bin3 = [&](__m128 p) {
-            const __m128i b = _mm_cvttps_epi32(_mm_mul_ps(_mm_sub_ps(p, origin), scale));
-            return _mm_min_epi32(_mm_max_epi32(b, _mm_setzero_si128()), top);
-        };
+        // AxisBins::bin on the three axes at once, in the same arithmetic, so that split_spatially's bins agree.
+        const sah_binning::BinMapping mapping({spatial_binning::load_point(bounds.lower), spatial_binning::load_point(bounds.upper)}, bins);
         auto chunk = [&](size_t b, size_t end) {
             Axes axes;
             alignas(16) int32_t first[4], last[4];
             for (size_t i = e.begin + b; i < e.begin + end; ++i) {
                 const PrimRef& ref = refs_[i];
                 const Box4 piece = Box4::of(ref);
-                const __m128i f = bin3(piece.lower), l = bin3(piece.upper);
+                const __m128i f = mapping.bin3(piece.lower), l = mapping.bin3(piece.upper);
                 _mm_store_si128(reinterpret_cast<__m128i*>(first), f);
                 _mm_store_si128(reinterpret_cast<__m128i*>(last), l);
                 const int same = _mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(f, l)));
