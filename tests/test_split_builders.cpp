@@ -1,11 +1,13 @@
 // The split builders (sbvh, presplit, esc): every reference's box lies inside its triangle's box and the boxes of
 // a triangle's references together hold the whole triangle, also for slivers, huge overlapping triangles and
 // extreme coordinates; SBVH's memory cap holds; bad options are refused; brute-force agreement on adversarial input.
+#include "accel/binned_sah.h"
 #include "accel/early_split_clipping.h"
 #include "accel/presplit.h"
 #include "accel/sbvh.h"
 #include "oracle.h"
 
+#include <cstring>
 #include <random>
 #include <stdexcept>
 
@@ -155,6 +157,11 @@ TEST_CASE("automatic SA_max splits scenes of slivers and leaves well-filled boxe
         CHECK(std::isinf(automatic_sa_max(filled.triangles, make_prim_refs(filled.triangles))));
         const Bvh esc = build_esc(BuildInput{filled.triangles, make_prim_refs(filled.triangles)}, {});
         CHECK(esc.refs.size() == filled.triangles.size());
+        // Nothing split, esc is binned SAH over the same references: the same tree, node for node.
+        const Bvh binned = build_binned_sah(BuildInput{filled.triangles, make_prim_refs(filled.triangles)}, {});
+        CHECK(esc.refs == binned.refs);
+        REQUIRE(esc.nodes.size() == binned.nodes.size());
+        CHECK(std::memcmp(esc.nodes.data(), binned.nodes.data(), esc.nodes.size() * sizeof(BvhNode)) == 0);
     }
 }
 
