@@ -66,7 +66,8 @@ private:
         PrimRef* refs = refs_.data();
         uint32_t l = range.begin, r = range.end;
         Box4 left_centroids = Box4::empty(), right_centroids = Box4::empty();
-        auto goes_left = [&](uint32_t i) { return mapping.bin(center2(refs[i]), split.axis) < split.bin; };
+        const BinMapping::Plane plane = mapping.plane(split.axis, split.bin);
+        auto goes_left = [&](uint32_t i) { return plane.left_of(refs[i]); };
         for (;;) {
             while (l < r && goes_left(l)) left_centroids.extend(center2(refs[l++]));
             while (l < r && !goes_left(r - 1)) right_centroids.extend(center2(refs[--r]));

@@ -35,6 +35,15 @@ T reduce(size_t n, size_t grain, const T& identity, F&& f, Join&& join) {
         join);
 }
 
+// reduce, with the identity made by make_identity() only when the range is split: serial work (most calls, in a
+// builder's lower levels) then never builds it, which matters when it is large (a grid of bins).
+template <class MakeIdentity, class F, class Join>
+auto reduce_lazy(size_t n, size_t grain, MakeIdentity&& make_identity, F&& f, Join&& join) {
+    if (n == 0) return make_identity();
+    if (n < 2 * grain) return f(size_t{0}, n);
+    return reduce(n, grain, make_identity(), f, join);
+}
+
 // Sums f(i) over [0, n) in fixed blocks of `grain`, the blocks added in order: the same double with any number
 // of threads (a floating-point reduce is not associative, so its value would depend on how the range was cut).
 template <class F>

@@ -7,6 +7,8 @@
 
 #include <immintrin.h>
 
+#include <algorithm>
+#include <cmath>
 #include <limits>
 
 namespace canopy::sah_binning {
@@ -39,10 +41,24 @@ struct Box4 {
 // Twice a reference's centroid (PrimRef::center2).
 inline __m128 center2(const PrimRef& r) { return _mm_add_ps(_mm_load_ps(&r.lower.x), _mm_load_ps(&r.upper.x)); }
 
-struct Bin {
-    Box4 bounds;
-    uint32_t count;
-    void add(const Bin& b) { bounds.extend(b.bounds); count += b.count; }
+// A bin's box as (lower, -upper) in one AVX register, so that one min extends both bounds: binning then loads,
+// extends and stores a bin once per axis instead of twice.
+struct Box8 {
+    __m256 v;
+
+    static Box8 empty() { return {_mm256_set1_ps(std::numeric_limits<float>::infinity())}; }
+    // From a PrimRef's 32 bytes (lower, id, upper, tag).
+    static Box8 of(__m256 lower_upper) { return {_mm256_xor_ps(lower_upper, _mm256_setr_ps(0, 0, 0, 0, -0.0f, -0.0f, -0.0f, -0.0f))}; }
+    void extend(const Box8& b) { v = _mm256_min_ps(v, b.v); }
+    __m128 lower() const { return _mm256_castps256_ps128(v); }
+    __m128 negated_upper() const { return _mm256_extractf128_ps(v, 1); }
+    Box4 box4() const { return {lower(), _mm_xor_ps(negated_upper(), _mm_set1_ps(-0.0f))}; }
+    // Box4::half_area's value: upper - lower is exactly -(negated upper + lower).
+    float half_area() const {
+        alignas(16) float e[4];
+        _mm_store_ps(e, _mm_max_ps(_mm_xor_ps(_mm_add_ps(negated_upper(), lower()), _mm_set1_ps(-0.0f)), _mm_setzero_ps()));
+        return e[0] * e[1] + e[1] * e[2] + e[2] * e[0];
+    }
 };
 
 // Maps points of a box (doubled centroids, for object bins) to `bins` intervals per axis, the same way in binning
@@ -60,19 +76,36 @@ struct BinMapping {
         const __m128i b = _mm_cvttps_epi32(_mm_mul_ps(_mm_sub_ps(c2, origin), scale));
         return _mm_min_epi32(_mm_max_epi32(b, _mm_setzero_si128()), _mm_set1_epi32(int(bins) - 1));
     }
-    uint32_t bin(__m128 c2, int axis) const {
-        alignas(16) int32_t b[4];
-        _mm_store_si128(reinterpret_cast<__m128i*>(b), bin3(c2));
-        return uint32_t(b[axis]);
+
+    // Which side of the plane before bin `first_right` on `axis` a reference's centroid falls: the same answer
+    // as bin3(center2(r))[axis] < first_right, in scalar float without the conversion and its round trip through
+    // memory (partitioning visits every reference of every node).
+    struct Plane {
+        int axis;
+        float origin, scale, first_right;
+        bool left_of(const PrimRef& r) const {
+            const float x = ((r.lower[axis] + r.upper[axis]) - origin) * scale;
+            // cvttps turns NaN and x >= 2^31 into INT_MIN, which bin3 clamps to bin 0: left of any plane.
+            return x < first_right || !(x < 2147483648.0f);
+        }
+    };
+    Plane plane(int axis, uint32_t first_right) const {
+        alignas(16) float o[4], s[4];
+        _mm_store_ps(o, origin);
+        _mm_store_ps(s, scale);
+        return {axis, o[axis], s[axis], float(first_right)};
     }
 };
 
 struct BinGrid {
-    Bin bins[3][kMaxBins];
+    Box8 boxes[3][kMaxBins];
+    uint32_t counts[3][kMaxBins];
 
     explicit BinGrid(uint32_t n) {
-        for (auto& axis : bins)
-            for (uint32_t i = 0; i < n; ++i) axis[i] = {Box4::empty(), 0};
+        for (int a = 0; a < 3; ++a) {
+            std::fill_n(boxes[a], n, Box8::empty());
+            std::fill_n(counts[a], n, 0u);
+        }
     }
 };
 
@@ -83,22 +116,27 @@ inline BinGrid bin_refs(const PrimRef* refs, uint32_t begin, uint32_t count, con
         BinGrid grid(n);
         alignas(16) int32_t b[4];
         for (size_t i = begin + first; i < begin + end; ++i) {
-            const Box4 box = Box4::of(refs[i]);
-            _mm_store_si128(reinterpret_cast<__m128i*>(b), mapping.bin3(_mm_add_ps(box.lower, box.upper)));
+            const __m256 ref = _mm256_load_ps(&refs[i].lower.x);
+            const __m128 c2 = _mm_add_ps(_mm256_castps256_ps128(ref), _mm256_extractf128_ps(ref, 1));
+            _mm_store_si128(reinterpret_cast<__m128i*>(b), mapping.bin3(c2));
+            const Box8 box = Box8::of(ref);
             for (int a = 0; a < 3; ++a) {
-                Bin& bin = grid.bins[a][b[a]];
-                bin.bounds.extend(box);
-                ++bin.count;
+                grid.boxes[a][b[a]].extend(box);
+                ++grid.counts[a][b[a]];
             }
         }
         return grid;
     };
     auto join = [n](BinGrid x, const BinGrid& y) {
-        for (int a = 0; a < 3; ++a)
-            for (uint32_t i = 0; i < n; ++i) x.bins[a][i].add(y.bins[a][i]);
+        for (int a = 0; a < 3; ++a) {
+            for (uint32_t i = 0; i < n; ++i) {
+                x.boxes[a][i].extend(y.boxes[a][i]);
+                x.counts[a][i] += y.counts[a][i];
+            }
+        }
         return x;
     };
-    return parallel::reduce(count, kParallelGrain, BinGrid(n), bin_chunk, join);
+    return parallel::reduce_lazy(count, kParallelGrain, [n] { return BinGrid(n); }, bin_chunk, join);
 }
 
 struct Split {
@@ -109,26 +147,43 @@ struct Split {
     uint32_t left_count = 0, right_count = 0;
 };
 
-// The SAH sweep over the bin planes of every axis; a side's cost is its area times its triangle tests.
+// The SAH sweep over the bin planes of every axis; a side's cost is its area times its triangle tests. Only the
+// winner's boxes and counts are gathered, after the sweep.
 inline Split best_split(const BinGrid& grid, uint32_t n, const BuildSettings& settings) {
+    // settings.leaf_tests without its integer division (exact for the power-of-two blocks kernels use)
+    const float per_block = 1.0f / float(settings.leaf_block);
+    auto tests = [per_block](uint32_t count) { return std::ceil(float(count) * per_block); };
     Split best;
     for (int axis = 0; axis < 3; ++axis) {
-        const Bin* bins = grid.bins[axis];
-        float right_cost[kMaxBins];  // right_cost[i]: bins [i, n)
-        Bin right[kMaxBins];
-        Bin suffix = bins[n - 1];
+        const Box8* boxes = grid.boxes[axis];
+        const uint32_t* counts = grid.counts[axis];
+        float right_cost[kMaxBins];  // right_cost[i]: bins [i, n), negative when they are empty
+        Box8 box = boxes[n - 1];
+        uint32_t count = counts[n - 1];
         for (uint32_t i = n - 1; i > 0; --i) {
-            right_cost[i] = suffix.count ? suffix.bounds.half_area() * settings.leaf_tests(suffix.count) : -1.0f;
-            right[i] = suffix;
-            suffix.add(bins[i - 1]);
+            right_cost[i] = count ? box.half_area() * tests(count) : -1.0f;
+            box.extend(boxes[i - 1]);
+            count += counts[i - 1];
         }
-        Bin prefix = bins[0];
-        for (uint32_t i = 1; i < n; prefix.add(bins[i++])) {
-            if (prefix.count == 0 || right_cost[i] < 0.0f) continue;
-            const float cost = prefix.bounds.half_area() * settings.leaf_tests(prefix.count) + right_cost[i];
-            if (cost < best.cost) best = {axis, i, cost, prefix.bounds, right[i].bounds, prefix.count, right[i].count};
+        box = boxes[0];
+        count = counts[0];
+        for (uint32_t i = 1; i < n; ++i) {
+            if (count != 0 && right_cost[i] >= 0.0f) {
+                const float cost = box.half_area() * tests(count) + right_cost[i];
+                if (cost < best.cost) best.axis = axis, best.bin = i, best.cost = cost;
+            }
+            box.extend(boxes[i]);
+            count += counts[i];
         }
     }
+    if (best.axis < 0) return best;
+    Box8 left = Box8::empty(), right = Box8::empty();
+    for (uint32_t i = 0; i < n; ++i) {
+        (i < best.bin ? left : right).extend(grid.boxes[best.axis][i]);
+        (i < best.bin ? best.left_count : best.right_count) += grid.counts[best.axis][i];
+    }
+    best.left = left.box4();
+    best.right = right.box4();
     return best;
 }
 

@@ -204,9 +204,8 @@ private:
     void split_by_objects(const Extent& e, const Candidate& split, const sah_binning::BinMapping& mapping, const BBox& bounds, uint32_t node,
                           uint32_t descendants, uint32_t depth) {
         PrimRef* first = refs_.data() + e.begin;
-        PrimRef* middle = std::partition(first, first + e.count, [&](const PrimRef& r) {
-            return mapping.bin(sah_binning::center2(r), split.axis) < split.plane;
-        });
+        const sah_binning::BinMapping::Plane plane = mapping.plane(split.axis, split.plane);
+        PrimRef* middle = std::partition(first, first + e.count, [&](const PrimRef& r) { return plane.left_of(r); });
         const auto left = uint32_t(middle - first);
         emit_children(e, left, e.count - left, true, bounds, node, descendants, depth);
     }
