@@ -49,6 +49,7 @@ struct Box8 {
     static Box8 empty() { return {_mm256_set1_ps(std::numeric_limits<float>::infinity())}; }
     // From a PrimRef's 32 bytes (lower, id, upper, tag).
     static Box8 of(__m256 lower_upper) { return {_mm256_xor_ps(lower_upper, _mm256_setr_ps(0, 0, 0, 0, -0.0f, -0.0f, -0.0f, -0.0f))}; }
+    static Box8 of(const Box4& b) { return {_mm256_set_m128(_mm_xor_ps(b.upper, _mm_set1_ps(-0.0f)), b.lower)}; }
     void extend(const Box8& b) { v = _mm256_min_ps(v, b.v); }
     __m128 lower() const { return _mm256_castps256_ps128(v); }
     __m128 negated_upper() const { return _mm256_extractf128_ps(v, 1); }
@@ -147,12 +148,18 @@ struct Split {
     uint32_t left_count = 0, right_count = 0;
 };
 
+// BuildSettings::leaf_tests without its integer division, for sweeps that price every bin plane (the same values
+// for the power-of-two blocks the kernels use).
+struct LeafTests {
+    float per_block;
+    explicit LeafTests(const BuildSettings& settings) : per_block(1.0f / float(settings.leaf_block)) {}
+    float operator()(uint32_t count) const { return std::ceil(float(count) * per_block); }
+};
+
 // The SAH sweep over the bin planes of every axis; a side's cost is its area times its triangle tests. Only the
 // winner's boxes and counts are gathered, after the sweep.
 inline Split best_split(const BinGrid& grid, uint32_t n, const BuildSettings& settings) {
-    // settings.leaf_tests without its integer division (exact for the power-of-two blocks kernels use)
-    const float per_block = 1.0f / float(settings.leaf_block);
-    auto tests = [per_block](uint32_t count) { return std::ceil(float(count) * per_block); };
+    const LeafTests tests(settings);
     Split best;
     for (int axis = 0; axis < 3; ++axis) {
         const Box8* boxes = grid.boxes[axis];

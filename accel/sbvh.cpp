@@ -15,6 +15,7 @@ namespace canopy {
 namespace {
 
 using sah_binning::Box4;
+using sah_binning::Box8;
 using spatial_binning::AxisBins;
 using spatial_binning::SpatialAxis;
 
@@ -44,27 +45,44 @@ struct NodeInfo {
 };
 
 // Sweeps the planes between one axis's spatial bins: the left side holds the references that enter a bin left of
-// the plane, the right side those that leave one right of it.
-void sweep(const SpatialAxis& bins, uint32_t n, int axis, const BuildSettings& settings, Candidate& best) {
-    std::array<Box4, kSpatialBins> right_box;
+// the plane, the right side those that leave one right of it. Records a cheaper plane's cost, axis and plane only;
+// spatial_sides fills in the winner's sides.
+void sweep(const SpatialAxis& bins, uint32_t n, int axis, const sah_binning::LeafTests& tests, Candidate& best) {
+    std::array<float, kSpatialBins> right_cost;
     std::array<uint32_t, kSpatialBins> right_n{};
-    Box4 box = Box4::empty();
+    Box8 box = Box8::empty();
     uint32_t count = 0;
     for (uint32_t i = n; i-- > 1;) {
         box.extend(bins.bounds[i]);
         count += bins.exits[i];
-        right_box[i] = box;
+        right_cost[i] = box.half_area() * tests(count);
         right_n[i] = count;
     }
-    box = Box4::empty();
+    box = Box8::empty();
     count = 0;
     for (uint32_t i = 1; i < n; ++i) {
         box.extend(bins.bounds[i - 1]);
         count += bins.entries[i - 1];
         if (count == 0 || right_n[i] == 0) continue;
-        const float cost = box.half_area() * settings.leaf_tests(count) + right_box[i].half_area() * settings.leaf_tests(right_n[i]);
-        if (cost < best.cost) best = {cost, axis, i, box.bbox(), right_box[i].bbox(), count, right_n[i]};
+        const float cost = box.half_area() * tests(count) + right_cost[i];
+        if (cost < best.cost) best.cost = cost, best.axis = axis, best.plane = i;
     }
+}
+
+// The boxes and reference counts of the sides of `split`, a plane found by sweep on these bins.
+void spatial_sides(const SpatialAxis& bins, uint32_t n, Candidate& split) {
+    Box8 left = Box8::empty(), right = Box8::empty();
+    for (uint32_t i = 0; i < n; ++i) {
+        if (i < split.plane) {
+            left.extend(bins.bounds[i]);
+            split.left_count += bins.entries[i];
+        } else {
+            right.extend(bins.bounds[i]);
+            split.right_count += bins.exits[i];
+        }
+    }
+    split.left = left.box4().bbox();
+    split.right = right.box4().bbox();
 }
 
 class SbvhBuilder {
@@ -173,6 +191,7 @@ private:
             for (size_t i = e.begin + b; i < e.begin + end; ++i) {
                 const PrimRef& ref = refs_[i];
                 const Box4 piece = Box4::of(ref);
+                const Box8 piece8 = Box8::of(_mm256_load_ps(&ref.lower.x));
                 const __m128i f = mapping.bin3(piece.lower), l = mapping.bin3(piece.upper);
                 _mm_store_si128(reinterpret_cast<__m128i*>(first), f);
                 _mm_store_si128(reinterpret_cast<__m128i*>(last), l);
@@ -180,7 +199,7 @@ private:
                 for (int axis = 0; axis < 3; ++axis) {
                     SpatialAxis& out = axes[axis];
                     if (same >> axis & 1) {  // most references, in all but the top levels: no clipping
-                        out.bounds[first[axis]].extend(piece);
+                        out.bounds[first[axis]].extend(piece8);
                         ++out.entries[first[axis]];
                         ++out.exits[first[axis]];
                     } else {
@@ -194,10 +213,12 @@ private:
             for (int axis = 0; axis < 3; ++axis) a[axis].add(b[axis]);
             return a;
         };
-        const Axes axes = parallel::reduce(e.count, kParallelBinningGrain, Axes{}, chunk, join);
+        const Axes axes = parallel::reduce_lazy(e.count, kParallelBinningGrain, [] { return Axes{}; }, chunk, join);
+        const sah_binning::LeafTests tests(settings_);
         Candidate best;
         for (int axis = 0; axis < 3; ++axis)
-            if (bounds.upper[axis] > bounds.lower[axis]) sweep(axes[axis], bins, axis, settings_, best);
+            if (bounds.upper[axis] > bounds.lower[axis]) sweep(axes[axis], bins, axis, tests, best);
+        if (best.axis >= 0) spatial_sides(axes[best.axis], bins, best);
         return best;
     }
 

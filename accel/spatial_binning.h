@@ -29,10 +29,10 @@ struct AxisBins {
 
 // One axis's spatial bins: each bin's box and how many references enter (start in) and leave (end in) it.
 struct SpatialAxis {
-    std::array<Box4, kMaxBins> bounds;
+    std::array<sah_binning::Box8, kMaxBins> bounds;
     std::array<uint32_t, kMaxBins> entries{}, exits{};
 
-    SpatialAxis() { bounds.fill(Box4::empty()); }
+    SpatialAxis() { bounds.fill(sah_binning::Box8::empty()); }
     void add(const SpatialAxis& o) {
         for (uint32_t i = 0; i < kMaxBins; ++i) {
             bounds[i].extend(o.bounds[i]);
@@ -44,10 +44,11 @@ struct SpatialAxis {
 
 inline __m128 load_point(const Vec3& p) { return _mm_setr_ps(p.x, p.y, p.z, 0.0f); }
 
-// Where edge a-b crosses the plane at `position` on `axis` (lane mask `on_axis`), in float. The edge's parameter
-// is clamped to [0, 1], so a plane that rounding puts just outside the edge gives an end point, never a NaN.
-inline __m128 edge_crossing(__m128 a, __m128 b, float a_axis, float b_axis, float position, __m128 on_axis) {
-    const float t = (position - a_axis) / (b_axis - a_axis);
+// Where edge a-b crosses the plane at `position` on `axis` (lane mask `on_axis`), in float, given the reciprocal
+// of the edge's length on the axis. The edge's parameter is clamped to [0, 1], so a plane that rounding puts just
+// outside the edge gives an end point, as does a zero length (an infinite or NaN parameter).
+inline __m128 edge_crossing(__m128 a, __m128 b, float a_axis, float inv_length, float position, __m128 on_axis) {
+    const float t = (position - a_axis) * inv_length;
     const float s = t > 0.0f ? (t < 1.0f ? t : 1.0f) : 0.0f;
     const __m128 p = _mm_add_ps(a, _mm_mul_ps(_mm_set1_ps(s), _mm_sub_ps(b, a)));
     return _mm_blendv_ps(p, _mm_set1_ps(position), on_axis);
@@ -71,6 +72,9 @@ void chop(const Triangle& triangle, const Box4& piece, int axis, const AxisBins&
     if (v[1].c < v[0].c) std::swap(v[0], v[1]);
     if (v[2].c < v[1].c) std::swap(v[1], v[2]);
     if (v[1].c < v[0].c) std::swap(v[0], v[1]);
+    // The edges' reciprocal lengths on the axis, in one division: v0-v2, v0-v1, v1-v2.
+    alignas(16) float inv[4];
+    _mm_store_ps(inv, _mm_div_ps(_mm_set1_ps(1.0f), _mm_setr_ps(v[2].c - v[0].c, v[1].c - v[0].c, v[2].c - v[1].c, 1.0f)));
     alignas(16) int32_t lanes[4] = {0, 0, 0, 0};
     lanes[axis] = -1;
     const __m128 on_axis = _mm_load_ps(reinterpret_cast<const float*>(lanes));
@@ -82,9 +86,9 @@ void chop(const Triangle& triangle, const Box4& piece, int axis, const AxisBins&
             if (vertex.c >= below && vertex.c <= above) box.extend(vertex.p);
         Box4 next = Box4::empty();
         if (k < last) {
-            const Vertex& other = above < v[1].c ? v[0] : v[2];
-            next.extend(edge_crossing(v[0].p, v[2].p, v[0].c, v[2].c, above, on_axis));
-            next.extend(edge_crossing(v[1].p, other.p, v[1].c, other.c, above, on_axis));
+            const bool low = above < v[1].c;  // the plane crosses v0-v1, else v1-v2
+            next.extend(edge_crossing(v[0].p, v[2].p, v[0].c, inv[0], above, on_axis));
+            next.extend(edge_crossing(v[1].p, low ? v[0].p : v[2].p, v[1].c, low ? -inv[1] : inv[2], above, on_axis));
             box.extend(next);
         }
         box = {_mm_max_ps(box.lower, piece.lower), _mm_min_ps(box.upper, piece.upper)};
@@ -98,7 +102,7 @@ void chop(const Triangle& triangle, const Box4& piece, int axis, const AxisBins&
 // bin, and it counts as entering the first and leaving the last.
 inline void bin_chopped(const Triangle& triangle, const Box4& piece, int axis, const AxisBins& map, uint32_t first,
                         uint32_t last, SpatialAxis& out) {
-    chop(triangle, piece, axis, map, first, last, [&](uint32_t k, const Box4& box) { out.bounds[k].extend(box); });
+    chop(triangle, piece, axis, map, first, last, [&](uint32_t k, const Box4& box) { out.bounds[k].extend(sah_binning::Box8::of(box)); });
     ++out.entries[first];
     ++out.exits[last];
 }
