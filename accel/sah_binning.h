@@ -1,7 +1,7 @@
 #pragma once
-// Binned SAH object splits in SSE lanes (Wald 2007, "On fast construction of SAH-based BVHs"), shared by the
-// builders that bin references by centroid: `binned` and `sbvh`. A reference's box loads straight from its
-// PrimRef (lower, id, upper, tag), and lane 3 is ignored throughout.
+// Binned SAH object splits in SSE and AVX lanes (Wald 2007, "On fast construction of SAH-based BVHs"), shared by
+// the builders that bin references by centroid: `binned` and `sbvh`. A reference's box loads straight from its
+// PrimRef (lower, id, upper, tag), and lane 3 (of each half, in AVX) is ignored throughout.
 #include "accel/builder.h"
 #include "accel/parallel.h"
 
@@ -54,12 +54,7 @@ struct Box8 {
     __m128 lower() const { return _mm256_castps256_ps128(v); }
     __m128 negated_upper() const { return _mm256_extractf128_ps(v, 1); }
     Box4 box4() const { return {lower(), _mm_xor_ps(negated_upper(), _mm_set1_ps(-0.0f))}; }
-    // Box4::half_area's value: upper - lower is exactly -(negated upper + lower).
-    float half_area() const {
-        alignas(16) float e[4];
-        _mm_store_ps(e, _mm_max_ps(_mm_xor_ps(_mm_add_ps(negated_upper(), lower()), _mm_set1_ps(-0.0f)), _mm_setzero_ps()));
-        return e[0] * e[1] + e[1] * e[2] + e[2] * e[0];
-    }
+    float half_area() const { return box4().half_area(); }
 };
 
 // Maps points of a box (doubled centroids, for object bins) to `bins` intervals per axis, the same way in binning
