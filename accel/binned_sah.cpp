@@ -113,6 +113,7 @@ private:
 }  // namespace
 
 Bvh build_binned_sah(BuildInput&& input, const BuildSettings& settings) {
+    require_power_of_two_block(settings);
     if (input.refs.empty()) return {};
     auto bounds = [&](size_t begin, size_t end) {
         std::pair<Box4, Box4> acc{Box4::empty(), Box4::empty()};

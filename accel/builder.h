@@ -18,8 +18,8 @@ struct BuildSettings {
     SahCosts costs;
     uint32_t max_leaf_size = 8;  // a leaf is split above this even when SAH prefers a leaf
     uint32_t bins = 32;          // binned builders
-    // Triangles the kernel tests at once (1 scalar, 4 SIMD): the SAH charges a leaf of n triangles for
-    // ceil(n / leaf_block) tests, so SIMD kernels get leaves that fill their lanes.
+    // Triangles the kernel tests at once (1 scalar, 4 SIMD; a power of two): the SAH charges a leaf of n triangles
+    // for ceil(n / leaf_block) tests, so SIMD kernels get leaves that fill their lanes.
     uint32_t leaf_block = 1;
     // Optimisers restructure a tree built by another builder: this one, or the optimiser's default if empty.
     std::string start;

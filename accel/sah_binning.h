@@ -8,8 +8,11 @@
 #include <immintrin.h>
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <limits>
+#include <stdexcept>
+#include <string>
 
 namespace canopy::sah_binning {
 
@@ -143,13 +146,19 @@ struct Split {
     uint32_t left_count = 0, right_count = 0;
 };
 
-// BuildSettings::leaf_tests without its integer division, for sweeps that price every bin plane (the same values
-// for the power-of-two blocks the kernels use).
+// BuildSettings::leaf_tests, the same values, for sweeps that price every bin plane: a multiply by the block's
+// reciprocal instead of an integer division, exact for the power-of-two blocks that kernels use (the builders that
+// sweep check the block once per build with require_power_of_two_block, not once per node here).
 struct LeafTests {
     float per_block;
     explicit LeafTests(const BuildSettings& settings) : per_block(1.0f / float(settings.leaf_block)) {}
     float operator()(uint32_t count) const { return std::ceil(float(count) * per_block); }
 };
+
+inline void require_power_of_two_block(const BuildSettings& settings) {
+    if (!std::has_single_bit(settings.leaf_block))
+        throw std::invalid_argument("leaf_block must be a power of two, got " + std::to_string(settings.leaf_block));
+}
 
 // The SAH sweep over the bin planes of every axis; a side's cost is its area times its triangle tests. Only the
 // winner's boxes and counts are gathered, after the sweep.

@@ -332,6 +332,7 @@ Bvh build_sbvh_with(BuildInput&& input, const BuildSettings& settings, const Sbv
     input.refs.resize(size_t(slots));
     BuildSettings priced = settings;
     priced.leaf_block = std::max(sbvh.leaf_block, 1u);
+    sah_binning::require_power_of_two_block(priced);
     SbvhBuilder builder(input.triangles, input.refs, priced, sbvh, root.half_area());
     Bvh bvh = builder.build(triangles);
     // Spatial splitting is interleaved with partitioning, not a pass of its own, so no split time is reported;

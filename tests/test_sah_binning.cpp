@@ -1,7 +1,9 @@
 // The object binning shared by binned and sbvh (accel/sah_binning.h): partitioning must send every reference to
 // the side its bin was counted on, or the children's boxes miss references; and the sweep must find the split a
 // plain evaluation of every bin plane finds, with that split's boxes and counts.
+#include "accel/builder.h"
 #include "accel/sah_binning.h"
+#include "accel/sbvh.h"
 
 #include <catch2/catch.hpp>
 
@@ -75,7 +77,7 @@ TEST_CASE("A bin plane agrees with the bins where the bin position is NaN or inf
 TEST_CASE("The sweep finds the best bin plane, with its boxes and counts", "[sah_binning]") {
     std::mt19937 rng(11);
     for (size_t n : {size_t(2), size_t(9), size_t(300), size_t(40000)})  // 40000: binned in parallel chunks
-        for (uint32_t block : {1u, 4u}) {
+        for (uint32_t block : {1u, 2u, 4u}) {
             const std::vector<PrimRef> refs = random_refs(n, 1.0f, 0.0f, rng);
             BuildSettings settings;
             settings.leaf_block = block;
@@ -106,4 +108,19 @@ TEST_CASE("The sweep finds the best bin plane, with its boxes and counts", "[sah
             const BBox l = split.left.bbox(), el = expected.left.bbox(), r = split.right.bbox(), er = expected.right.bbox();
             REQUIRE((l.lower == el.lower && l.upper == el.upper && r.lower == er.lower && r.upper == er.upper));
         }
+}
+
+TEST_CASE("The builders that sweep bins refuse a leaf block that is not a power of two", "[sah_binning]") {
+    std::mt19937 rng(3);
+    const std::vector<PrimRef> refs = random_refs(16, 1.0f, 0.0f, rng);
+    std::vector<Triangle> triangles(refs.size());
+    for (size_t i = 0; i < refs.size(); ++i) triangles[i] = {refs[i].lower, refs[i].upper, refs[i].lower + Vec3(0, 1, 0)};
+    BuildSettings settings;
+    settings.leaf_block = 3;
+    REQUIRE_THROWS_AS(find_builder("binned").build(BuildInput{triangles, refs}, settings), std::invalid_argument);
+    SbvhSettings sbvh;  // sbvh prices leaves by its own block, whatever the kernel's
+    sbvh.leaf_block = 3;
+    REQUIRE_THROWS_AS(build_sbvh_with(BuildInput{triangles, refs}, BuildSettings{}, sbvh), std::invalid_argument);
+    sbvh.leaf_block = 2;
+    REQUIRE_NOTHROW(build_sbvh_with(BuildInput{triangles, refs}, settings, sbvh));
 }
