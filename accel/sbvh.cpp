@@ -190,8 +190,9 @@ private:
             alignas(16) int32_t first[4], last[4];
             for (size_t i = e.begin + b; i < e.begin + end; ++i) {
                 const PrimRef& ref = refs_[i];
-                const Box4 piece = Box4::of(ref);
-                const Box8 piece8 = Box8::of(_mm256_load_ps(&ref.lower.x));
+                const __m256 lower_upper = _mm256_load_ps(&ref.lower.x);
+                const Box4 piece{_mm256_castps256_ps128(lower_upper), _mm256_extractf128_ps(lower_upper, 1)};
+                const Box8 piece8 = Box8::of(lower_upper);
                 const __m128i f = mapping.bin3(piece.lower), l = mapping.bin3(piece.upper);
                 _mm_store_si128(reinterpret_cast<__m128i*>(first), f);
                 _mm_store_si128(reinterpret_cast<__m128i*>(last), l);
