@@ -2,9 +2,9 @@
 #include "oracle.h"
 
 #include "accel/cluster_tree.h"
-#include "accel/lbvh_sah.h"
+#include "accel/builders/lbvh_sah.h"
 #include "accel/morton.h"
-#include "accel/ploc.h"
+#include "accel/builders/ploc.h"
 
 #include <numeric>
 #include <stdexcept>

@@ -1,7 +1,7 @@
 // Tree quality metrics against hand-computed values.
 #include "accel/metrics.h"
 #include "oracle.h"
-#include "renderer/study.h"
+#include "renderer/commands/study.h"
 
 #include <nlohmann/json.hpp>
 

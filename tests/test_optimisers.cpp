@@ -1,7 +1,7 @@
 // Tree optimisers: never worse by SAH than their start trees, deterministic, and usable on any start tree.
 #include "oracle.h"
 
-#include "accel/treelet_restructuring.h"
+#include "accel/builders/treelet_restructuring.h"
 
 #include <cstring>
 

@@ -1,9 +1,9 @@
 // The benchmark protocol's camera, path tracer, ray offset, EXR output and bench report.
 #include "oracle.h"
 #include "renderer/accelerator.h"
-#include "renderer/bench.h"
+#include "renderer/commands/bench.h"
 #include "renderer/auto_builder.h"
-#include "renderer/heatmap.h"
+#include "renderer/commands/heatmap.h"
 
 #include <OpenImageIO/imageio.h>
 #include <nlohmann/json.hpp>

@@ -1,6 +1,6 @@
 // Watertightness, extreme coordinates and scales, special directions and degenerate geometry.
 #include "oracle.h"
-#include "renderer/accuracy.h"
+#include "renderer/commands/accuracy.h"
 
 #include <cmath>
 

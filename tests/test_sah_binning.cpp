@@ -3,7 +3,7 @@
 // plain evaluation of every bin plane finds, with that split's boxes and counts.
 #include "accel/builder.h"
 #include "accel/sah_binning.h"
-#include "accel/sbvh.h"
+#include "accel/builders/sbvh.h"
 
 #include <catch2/catch.hpp>
 

@@ -1,10 +1,10 @@
 // The split builders (sbvh, presplit, esc): every reference's box lies inside its triangle's box and the boxes of
 // a triangle's references together hold the whole triangle, also for slivers, huge overlapping triangles and
 // extreme coordinates; SBVH's memory cap holds; bad options are refused; brute-force agreement on adversarial input.
-#include "accel/binned_sah.h"
-#include "accel/early_split_clipping.h"
-#include "accel/presplit.h"
-#include "accel/sbvh.h"
+#include "accel/builders/binned_sah.h"
+#include "accel/builders/early_split_clipping.h"
+#include "accel/builders/presplit.h"
+#include "accel/builders/sbvh.h"
 #include "oracle.h"
 
 #include <cstring>

@@ -2,7 +2,7 @@
 // in-place growing memory, and independence of the number of threads. The trees built on it are checked by the
 // oracle and invariant tests through the registry.
 #include "accel/builder.h"
-#include "accel/split_partitioning.h"
+#include "accel/builders/split_partitioning.h"
 
 #include <catch2/catch.hpp>
 #include <tbb/global_control.h>

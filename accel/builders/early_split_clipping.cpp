@@ -1,7 +1,7 @@
-#include "accel/early_split_clipping.h"
+#include "accel/builders/early_split_clipping.h"
 #include "accel/split_pass.h"
 
-#include "accel/binned_sah.h"
+#include "accel/builders/binned_sah.h"
 #include "accel/parallel.h"
 #include "accel/triangle_clipping.h"
 

@@ -1,4 +1,4 @@
-#include "accel/ploc.h"
+#include "accel/builders/ploc.h"
 
 #include "accel/cluster_tree.h"
 #include "accel/morton.h"

@@ -1,7 +1,7 @@
-#include "accel/lbvh_sah.h"
+#include "accel/builders/lbvh_sah.h"
 
 #include "accel/bvh_compact.h"
-#include "accel/lbvh.h"
+#include "accel/builders/lbvh.h"
 #include "accel/parallel.h"
 
 namespace canopy {

@@ -1,4 +1,4 @@
-#include "renderer/heatmap.h"
+#include "renderer/commands/heatmap.h"
 
 #include <OpenImageIO/imageio.h>
 #include <tbb/parallel_for.h>

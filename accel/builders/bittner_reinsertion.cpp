@@ -1,4 +1,4 @@
-#include "accel/bittner_reinsertion.h"
+#include "accel/builders/bittner_reinsertion.h"
 
 #include "accel/mutable_tree.h"
 

@@ -1,4 +1,4 @@
-#include "renderer/study.h"
+#include "renderer/commands/study.h"
 
 #include "accel/builder.h"
 #include "renderer/accelerator.h"

@@ -1,8 +1,8 @@
-#include "accel/bonsai.h"
+#include "accel/builders/bonsai.h"
 
 #include "accel/parallel.h"
-#include "accel/split_partitioning.h"
-#include "accel/sweep_sah.h"
+#include "accel/builders/split_partitioning.h"
+#include "accel/builders/sweep_sah.h"
 
 #include <bit>
 #include <chrono>

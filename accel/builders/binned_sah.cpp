@@ -1,4 +1,4 @@
-#include "accel/binned_sah.h"
+#include "accel/builders/binned_sah.h"
 
 #include "accel/sah_binning.h"
 #include "accel/sparse_tree.h"

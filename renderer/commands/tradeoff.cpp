@@ -1,8 +1,8 @@
-#include "renderer/tradeoff.h"
+#include "renderer/commands/tradeoff.h"
 
 #include "renderer/accelerator.h"
 #include "renderer/image.h"
-#include "renderer/plot.h"
+#include "renderer/commands/plot.h"
 
 #include <nlohmann/json.hpp>
 

@@ -1,7 +1,7 @@
-#include "renderer/accuracy.h"
+#include "renderer/commands/accuracy.h"
 
 #include "renderer/accelerator.h"
-#include "renderer/plot.h"
+#include "renderer/commands/plot.h"
 
 #include <glm/vec3.hpp>
 #include <nlohmann/json.hpp>

@@ -1,4 +1,4 @@
-#include "accel/split_partitioning.h"
+#include "accel/builders/split_partitioning.h"
 
 #include "accel/parallel.h"
 #include "accel/triangle_clipping.h"

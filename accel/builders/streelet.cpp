@@ -1,9 +1,9 @@
-#include "accel/streelet.h"
+#include "accel/builders/streelet.h"
 #include "accel/split_pass.h"
 
-#include "accel/lbvh.h"
-#include "accel/presplit.h"
-#include "accel/treelet_restructuring.h"
+#include "accel/builders/lbvh.h"
+#include "accel/builders/presplit.h"
+#include "accel/builders/treelet_restructuring.h"
 
 
 namespace canopy {

@@ -1,11 +1,11 @@
 // The canopy command: `render` a scene to EXR, `bench` builders against Embree.
 #include "accel/builder.h"
 #include "renderer/accelerator.h"
-#include "renderer/bench.h"
-#include "renderer/accuracy.h"
-#include "renderer/tradeoff.h"
-#include "renderer/heatmap.h"
-#include "renderer/study.h"
+#include "renderer/commands/bench.h"
+#include "renderer/commands/accuracy.h"
+#include "renderer/commands/tradeoff.h"
+#include "renderer/commands/heatmap.h"
+#include "renderer/commands/study.h"
 
 #include <CLI/CLI.hpp>
 #include <tbb/global_control.h>

@@ -1,4 +1,4 @@
-#include "renderer/plot.h"
+#include "renderer/commands/plot.h"
 
 #include <OpenImageIO/imagebuf.h>
 #include <OpenImageIO/imagebufalgo.h>

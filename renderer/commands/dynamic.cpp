@@ -1,4 +1,4 @@
-#include "renderer/dynamic.h"
+#include "renderer/commands/dynamic.h"
 
 #include <glm/gtc/matrix_transform.hpp>
 #include <glm/vec4.hpp>

@@ -1,4 +1,4 @@
-#include "accel/sweep_sah.h"
+#include "accel/builders/sweep_sah.h"
 
 #include "accel/parallel.h"
 #include "accel/sparse_tree.h"

@@ -1,4 +1,4 @@
-#include "accel/lbvh.h"
+#include "accel/builders/lbvh.h"
 
 #include "accel/morton.h"
 #include "accel/parallel.h"

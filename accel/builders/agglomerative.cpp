@@ -1,4 +1,4 @@
-#include "accel/agglomerative.h"
+#include "accel/builders/agglomerative.h"
 
 #include "accel/cluster_tree.h"
 #include "accel/morton.h"

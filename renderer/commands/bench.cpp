@@ -1,9 +1,9 @@
-#include "renderer/bench.h"
+#include "renderer/commands/bench.h"
 
 #include "accel/builder.h"
 #include "kernels/dispatch.h"
 #include "renderer/accelerator.h"
-#include "renderer/dynamic.h"
+#include "renderer/commands/dynamic.h"
 
 #include <nlohmann/json.hpp>
 

@@ -1,4 +1,4 @@
-#include "accel/tree_rotations.h"
+#include "accel/builders/tree_rotations.h"
 
 #include <algorithm>
 #include <atomic>

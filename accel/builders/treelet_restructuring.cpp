@@ -1,4 +1,4 @@
-#include "accel/treelet_restructuring.h"
+#include "accel/builders/treelet_restructuring.h"
 
 #include "accel/mutable_tree.h"
 

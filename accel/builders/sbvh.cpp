@@ -1,4 +1,4 @@
-#include "accel/sbvh.h"
+#include "accel/builders/sbvh.h"
 
 #include "accel/parallel.h"
 #include "accel/sah_binning.h"
