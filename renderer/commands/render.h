@@ -1,0 +1,30 @@
+#pragma once
+// `canopy render`: one scene, one accelerator, samples accumulated into an EXR (or a heat map of what primary
+// rays visit).
+#include <string>
+#include <vector>
+
+namespace canopy {
+
+struct RenderOptions {
+    std::string scene, output = "canopy.exr", builder = "binned", start, kernel = "auto", accel = "canopy";
+    std::string toplevel = "flat";
+    std::string blas_builder;  // two-level top levels: the object trees' builder ("" for --builder)
+    int frames_planned = 0;
+    std::string embree_quality = "medium";
+    int spp = 1, threads = 0, bounces = 8;
+    std::vector<int> size{1024, 768};
+    bool material_albedo = false, heatmap = false;
+    std::string traversal = "robust", intersector = "watertight", collapse = "optimal";
+};
+
+// Every registered builder's name, for the options' help.
+std::string builder_names();
+// A progress bar on stderr, fraction in [0, 1].
+void print_progress(float fraction);
+// --blas-builder names the object trees' builder, which only two-level top levels have.
+void check_blas_builder(const std::string& blas, const std::vector<std::string>& toplevels);
+
+void run_render(RenderOptions options);
+
+}  // namespace canopy
