@@ -32,35 +32,50 @@ struct ShadingScene {
     }
 };
 
+// A path's state between bounces: what it carries, what it has gathered, and its random numbers.
+struct PathState {
+    Vec3 throughput{1.0f}, radiance{0.0f};
+};
+
+// One bounce's shading, shared by every tracer so that `single` and `stream` paths mean the same: a miss adds the
+// white sky and ends the path; a hit takes the albedo and, unless `depth` was the last bounce, turns `ray` into
+// the next bounce's ray. Returns whether the path goes on.
+[[gnu::always_inline]] inline bool shade_bounce(const ShadingScene& scene, const Ray& ray, const Hit& hit, bool found,
+                                                int depth, PathState& path, Rng& rng, Ray& next) {
+    if (!found) {
+        path.radiance += path.throughput;  // white sky
+        return false;
+    }
+    const Triangle& tri = scene.flat.triangles[hit.prim];
+    Vec3 n = geometric_normal(tri);
+    const float len2 = glm::dot(n, n);
+    n = len2 > 0.0f && std::isfinite(len2) ? n / std::sqrt(len2) : -ray.dir;
+    if (glm::dot(n, ray.dir) > 0.0f) n = -n;
+    path.throughput *= scene.albedo(hit.prim);
+    if (depth == scene.settings.max_bounces) return false;
+    const Vec3 p = tri.v0 + hit.u * (tri.v1 - tri.v0) + hit.v * (tri.v2 - tri.v0);
+    // Written member by member, not as next = Ray{...}: GCC built that temporary with small stores and copied it
+    // with one 32-byte load, which waited for them (a failed store forward, 13% of this loop's samples with
+    // canopy's kernels, which read the ray from memory; Embree's copy reads the members one by one).
+    next.org = offset_ray_origin(p, n, triangle_point_error(tri));
+    next.dir = cosine_direction(n, rng.next_float(), rng.next_float());
+    next.tmin = 0.0f;
+    next.tmax = std::numeric_limits<float>::infinity();
+    return true;
+}
+
 // One path from its first ray; `ray` then holds each bounce's ray in turn. By reference, so the caller's ray is the
-// one traced, not a copy (see the bounce below).
+// one traced, not a copy.
 template <class Tracer>
 Vec3 trace_path(const Tracer& tracer, const ShadingScene& scene, Ray& ray, Rng& rng, uint64_t& rays) {
-    Vec3 throughput(1.0f), radiance(0.0f);
-    for (int depth = 0; depth <= scene.settings.max_bounces; ++depth) {
+    PathState path;
+    for (int depth = 0;; ++depth) {
         Hit hit;
         ++rays;
-        if (!tracer.closest(ray, hit)) {
-            radiance += throughput;  // white sky
-            break;
-        }
-        const Triangle& tri = scene.flat.triangles[hit.prim];
-        Vec3 n = geometric_normal(tri);
-        const float len2 = glm::dot(n, n);
-        n = len2 > 0.0f && std::isfinite(len2) ? n / std::sqrt(len2) : -ray.dir;
-        if (glm::dot(n, ray.dir) > 0.0f) n = -n;
-        throughput *= scene.albedo(hit.prim);
-        if (depth == scene.settings.max_bounces) break;
-        const Vec3 p = tri.v0 + hit.u * (tri.v1 - tri.v0) + hit.v * (tri.v2 - tri.v0);
-        // Written member by member, not as ray = Ray{...}: GCC built that temporary with small stores and copied it
-        // with one 32-byte load, which waited for them (a failed store forward, 13% of this loop's samples with
-        // canopy's kernels, which read the ray from memory; Embree's copy reads the members one by one).
-        ray.org = offset_ray_origin(p, n, triangle_point_error(tri));
-        ray.dir = cosine_direction(n, rng.next_float(), rng.next_float());
-        ray.tmin = 0.0f;
-        ray.tmax = std::numeric_limits<float>::infinity();
+        const bool found = tracer.closest(ray, hit);
+        if (!shade_bounce(scene, ray, hit, found, depth, path, rng, ray)) break;
     }
-    return radiance;
+    return path.radiance;
 }
 
 // Renders one sample per pixel of frame `frame` and adds it to `accumulated`. Returns rays traced.
