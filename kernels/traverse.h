@@ -88,6 +88,7 @@ struct SlabRay {
     Vec3 inv_dir, near_add, far_add;
     int near[3], far[3];
 
+    SlabRay() = default;  // for arrays of rays set up later (stream traversal)
     // In SSE lanes x, y, z: one division for the three reciprocals, no branches.
     [[gnu::always_inline]] SlabRay(const Ray& ray, float plane_bound, bool robust) {
         const __m128 sign = _mm_set1_ps(-0.0f);

@@ -2,8 +2,10 @@
 #include "accel/metrics.h"
 #include "kernels/dispatch.h"
 #include "kernels/traverse.h"
+#include "kernels/traverse_stream.h"
 #include "kernels/traverse_two_level.h"
 #include "renderer/accelerator.h"
+#include "renderer/wavefront.h"
 #include "renderer/auto_builder.h"
 
 #include <variant>
@@ -15,6 +17,15 @@ template <class Layout, bool Robust, class TriangleTest>
 struct CanopyTracer {
     const Layout& bvh;
     bool closest(const Ray& ray, Hit& hit) const { return closest_hit<Robust, TriangleTest>(bvh, ray, hit); }
+};
+
+template <class Layout, bool Robust, class TriangleTest>
+struct CanopyBatchTracer {
+    using Scratch = StreamScratch<Layout::kWidth>;
+    const Layout& bvh;
+    void closest(std::span<const Ray> rays, std::span<Hit> hits, Scratch& scratch) const {
+        traverse_batch<Query::Closest, Robust, TriangleTest>(bvh, rays, hits, scratch);
+    }
 };
 
 // Calls f(robust, triangle test) with both as types, so each combination is its own compiled kernel.
@@ -166,7 +177,10 @@ public:
     uint64_t render(const ShadingScene& scene, const PinholeCamera& camera, uint32_t frame, Image& image,
                     const std::function<void(float)>& on_tile) const override {
         return with_kernel([&]<int N, bool Robust, class Test>(const auto& bvh) {
-            return render_frame(CanopyTracer<std::decay_t<decltype(bvh)>, Robust, Test>{bvh}, scene, camera, frame, image, on_tile);
+            using Layout = std::decay_t<decltype(bvh)>;
+            if (scene.settings.tracer == TracerKind::Stream)
+                return render_frame_stream(CanopyBatchTracer<Layout, Robust, Test>{bvh}, scene, camera, frame, image, on_tile);
+            return render_frame(CanopyTracer<Layout, Robust, Test>{bvh}, scene, camera, frame, image, on_tile);
         });
     }
 

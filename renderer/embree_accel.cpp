@@ -1,6 +1,7 @@
 // Intel Embree 3 as the reference accelerator: same flat triangles, same path tracer, same camera and
 // random numbers as canopy; only the BVH build and traversal are Embree's.
 #include "renderer/accelerator.h"
+#include "renderer/wavefront.h"
 
 #include <embree3/rtcore.h>
 
@@ -20,6 +21,27 @@ RTCBuildQuality parse_quality(const std::string& quality) {
     throw std::invalid_argument("unknown Embree quality '" + quality + "' (known: low, medium, high)");
 }
 
+void to_embree(const Ray& ray, RTCRayHit& rh) {
+    rh.ray.org_x = ray.org.x, rh.ray.org_y = ray.org.y, rh.ray.org_z = ray.org.z;
+    rh.ray.dir_x = ray.dir.x, rh.ray.dir_y = ray.dir.y, rh.ray.dir_z = ray.dir.z;
+    rh.ray.tnear = ray.tmin;
+    rh.ray.tfar = ray.tmax;
+    rh.ray.time = 0.0f;
+    rh.ray.mask = 0xffffffffu;
+    rh.ray.id = 0;
+    rh.ray.flags = 0;
+    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+    rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+}
+
+// Embree's answer as canopy's Hit, triangle ids numbered as in the flat scene.
+bool from_embree(const RTCRayHit& rh, const uint32_t* prim_offsets, Hit& hit) {
+    if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return false;
+    const uint32_t offset = prim_offsets && rh.hit.instID[0] != RTC_INVALID_GEOMETRY_ID ? prim_offsets[rh.hit.instID[0]] : 0;
+    hit = {rh.ray.tfar, rh.hit.u, rh.hit.v, offset + rh.hit.primID};
+    return true;
+}
+
 struct EmbreeTracer {
     RTCScene scene;
     const uint32_t* prim_offsets = nullptr;  // two-level: per instance, its first scene-wide triangle id
@@ -27,21 +49,32 @@ struct EmbreeTracer {
         RTCIntersectContext context;
         rtcInitIntersectContext(&context);
         RTCRayHit rh;
-        rh.ray.org_x = ray.org.x, rh.ray.org_y = ray.org.y, rh.ray.org_z = ray.org.z;
-        rh.ray.dir_x = ray.dir.x, rh.ray.dir_y = ray.dir.y, rh.ray.dir_z = ray.dir.z;
-        rh.ray.tnear = ray.tmin;
-        rh.ray.tfar = ray.tmax;
-        rh.ray.time = 0.0f;
-        rh.ray.mask = 0xffffffffu;
-        rh.ray.id = 0;
-        rh.ray.flags = 0;
-        rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-        rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+        to_embree(ray, rh);
         rtcIntersect1(scene, &context, &rh);
-        if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return false;
-        const uint32_t offset = prim_offsets && rh.hit.instID[0] != RTC_INVALID_GEOMETRY_ID ? prim_offsets[rh.hit.instID[0]] : 0;
-        hit = {rh.ray.tfar, rh.hit.u, rh.hit.v, offset + rh.hit.primID};
-        return true;
+        return from_embree(rh, prim_offsets, hit);
+    }
+};
+
+// The stream tracer's batches through Embree's ray stream interface, rtcIntersect1M, told the rays are incoherent.
+struct EmbreeBatchTracer {
+    struct Scratch {
+        std::vector<RTCRayHit> rays;
+        size_t bytes() const { return rays.capacity() * sizeof(RTCRayHit); }
+    };
+    RTCScene scene;
+    const uint32_t* prim_offsets = nullptr;
+
+    void closest(std::span<const Ray> rays, std::span<Hit> hits, Scratch& scratch) const {
+        scratch.rays.resize(rays.size());
+        for (size_t i = 0; i < rays.size(); ++i) to_embree(rays[i], scratch.rays[i]);
+        RTCIntersectContext context;
+        rtcInitIntersectContext(&context);
+        context.flags = RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
+        rtcIntersect1M(scene, &context, scratch.rays.data(), unsigned(rays.size()), sizeof(RTCRayHit));
+        for (size_t i = 0; i < rays.size(); ++i) {
+            hits[i] = Hit{};
+            from_embree(scratch.rays[i], prim_offsets, hits[i]);
+        }
     }
 };
 
@@ -124,6 +157,8 @@ public:
 
     uint64_t render(const ShadingScene& scene, const PinholeCamera& camera, uint32_t frame, Image& image,
                     const std::function<void(float)>& on_tile) const override {
+        if (scene.settings.tracer == TracerKind::Stream)
+            return render_frame_stream(EmbreeBatchTracer{scene_, offsets()}, scene, camera, frame, image, on_tile);
         return render_frame(EmbreeTracer{scene_, offsets()}, scene, camera, frame, image, on_tile);
     }
 

@@ -15,16 +15,25 @@
 
 namespace canopy {
 
+// How a frame's paths meet the accelerator: one path at a time to its end (`single`, the protocol's reference), or
+// every path of a batch one bounce at a time, each bounce's rays traced as one sorted batch (`stream`, wavefront.h).
+enum class TracerKind { Single, Stream };
+
 struct FrameSettings {
     int width = 1024, height = 768;
+    TracerKind tracer = TracerKind::Single;
+    uint32_t stream_paths = 1u << 16;  // stream: paths in flight per batch (each batch on one thread)
     int max_bounces = 8;           // at most max_bounces + 1 closest-hit rays per path
     bool material_albedo = false;  // protocol: albedo 0.8 everywhere unless the scene asks for Kd
     float albedo = 0.8f;
 };
 
+struct StreamStats;
+
 struct ShadingScene {
     const FlatScene& flat;
     const FrameSettings& settings;
+    StreamStats* stream_stats = nullptr;  // the stream tracer's sort time and memory, when the caller wants them
 
     Vec3 albedo(uint32_t prim) const {
         if (settings.material_albedo && !flat.material.empty()) return flat.materials[flat.material[prim]].kd;

@@ -4,6 +4,7 @@
 #include "kernels/dispatch.h"
 #include "renderer/accelerator.h"
 #include "renderer/commands/dynamic.h"
+#include "renderer/wavefront.h"
 
 #include <nlohmann/json.hpp>
 
@@ -14,6 +15,8 @@
 #include <numeric>
 #include <optional>
 #include <stdexcept>
+
+#include <tbb/task_arena.h>
 
 namespace canopy {
 namespace {
@@ -33,7 +36,9 @@ double median(std::vector<double> v) {
 double mean(const std::vector<double>& v) { return std::accumulate(v.begin(), v.end(), 0.0) / double(v.size()); }
 
 struct Entry {
-    std::unique_ptr<Accelerator> accel;
+    std::shared_ptr<Accelerator> accel;  // shared by the rows of its tracers, built once
+    TracerKind tracer = TracerKind::Single;
+    std::shared_ptr<StreamStats> stream = std::make_shared<StreamStats>();  // the stream tracer's sorting and memory
     std::vector<double> build_ms, frame_ms;
     std::vector<double> rebuild_ms;  // dynamic scenes: per timed frame, after the object moved
     uint64_t rays = 0;
@@ -46,12 +51,44 @@ struct Entry {
     double total_mean() const { return rebuild_mean() + frame_mean(); }  // Table 3's build + render
     double rays_per_frame() const { return double(rays) / double(frame_ms.size()); }
     std::string label() const {
-        if (accel->library() == "embree") return "embree " + accel->quality();
+        const std::string suffix = tracer == TracerKind::Stream ? " stream" : "";
+        if (accel->library() == "embree") return "embree " + accel->quality() + suffix;
         const std::string chosen = accel->chosen();
         const std::string planned = accel->frames_planned() ? "@" + std::to_string(accel->frames_planned()) : "";
-        return accel->builder() + planned + (chosen.empty() ? "" : "(" + chosen + ")") + " " + accel->kernel();
+        return accel->builder() + planned + (chosen.empty() ? "" : "(" + chosen + ")") + " " + accel->kernel() + suffix;
+    }
+    // The stream tracer's share of the timed frames spent sorting rays (all threads' time over threads x frames).
+    double sort_share() const {
+        const double threads = double(tbb::this_task_arena::max_concurrency());
+        return double(stream->sort_ns.load()) / 1e6 / threads / std::accumulate(frame_ms.begin(), frame_ms.end(), 0.0);
     }
 };
+
+TracerKind parse_tracer(const std::string& name) {
+    if (name == "single") return TracerKind::Single;
+    if (name == "stream") return TracerKind::Stream;
+    throw std::invalid_argument("unknown --tracer '" + name + "' (known: single, stream)");
+}
+
+const char* tracer_name(TracerKind tracer) { return tracer == TracerKind::Stream ? "stream" : "single"; }
+
+// Every accelerator once per tracer, the first tracer's row building it, the others sharing it.
+std::vector<Entry> rows_per_tracer(std::vector<Entry> accelerators, const std::vector<std::string>& tracers) {
+    std::vector<Entry> rows;
+    for (Entry& a : accelerators)
+        for (const std::string& t : tracers) {
+            Entry row;
+            row.accel = a.accel;
+            row.tracer = parse_tracer(t);
+            rows.push_back(std::move(row));
+        }
+    return rows;
+}
+
+// The first row of each accelerator builds it; the rows of its other tracers report those builds.
+bool builds_its_accelerator(const std::vector<Entry>& entries, size_t i) {
+    return i == 0 || entries[i - 1].accel != entries[i].accel;
+}
 
 // --start applies to the optimisers in a bench; plain builders in the same run ignore it.
 std::string optimiser_start(const std::string& builder, const std::string& start) {
@@ -88,14 +125,14 @@ std::vector<Entry> make_entries(const Scene& scene, const FlatScene& flat, const
         entries.push_back({make_embree_accelerator(flat, quality, o.threads)});
         if (two_level) entries.push_back({make_embree_two_level_accelerator(scene, flat, quality, o.threads)});
     }
-    return entries;
+    return rows_per_tracer(std::move(entries), o.tracers);
 }
 
-// The Embree row that ratios refer to: MEDIUM when present (like for like with binned SAH).
-const Entry* reference_of(const std::vector<Entry>& entries) {
+// The Embree row that ratios refer to: MEDIUM when present (like for like with binned SAH), with `tracer`.
+const Entry* reference_of(const std::vector<Entry>& entries, TracerKind tracer = TracerKind::Single) {
     const Entry* ref = nullptr;
     for (const Entry& e : entries)
-        if (e.accel->library() == "embree" && (!ref || e.accel->quality() == "medium")) ref = &e;
+        if (e.accel->library() == "embree" && e.tracer == tracer && (!ref || e.accel->quality() == "medium")) ref = &e;
     return ref;
 }
 
@@ -109,7 +146,9 @@ void print_table(const std::vector<Entry>& entries, uint64_t tris) {
     std::printf("\n%-22s %10s %8s %10s %8s %11s %8s %7s %7s %9s %9s %7s %8s %8s %7s %8s %10s",
                 "accelerator", "build ms", "Mprim/s", "frame ms", "Mrays/s", "rays/frame", "SAH", "EPO", "wSAH", "nodes",
                 "leaves", "split%", "split ms", "%build", "alloc%", "MB", "img mean");
+    const bool streams = std::any_of(entries.begin(), entries.end(), [](const Entry& e) { return e.tracer == TracerKind::Stream; });
     if (ref) std::printf(" %9s %9s", "build/emb", "frame/emb");
+    if (ref && streams) std::printf(" %10s", "frame/same");  // against Embree with the row's own tracer
     std::printf("\n");
     for (const Entry& e : entries) {
         const AcceleratorReport& r = e.report;
@@ -132,9 +171,16 @@ void print_table(const std::vector<Entry>& entries, uint64_t tris) {
         else std::printf("%8s %8s %7s ", "-", "-", "-");
         std::printf("%8.1f %10.5f", r.bytes ? double(*r.bytes) / 1e6 : 0.0, e.image_mean);
         if (ref) std::printf(" %9.3f %9.3f", e.build_min() / ref->build_min(), frame / ref->frame_mean());
+        if (const Entry* same = reference_of(entries, e.tracer); ref && streams && same)
+            std::printf(" %10.3f", frame / same->frame_mean());
         std::printf("\n");
     }
-    if (ref) std::printf("ratios against %s, measured in this run\n", ref->label().c_str());
+    if (ref) std::printf("ratios against %s, measured in this run%s\n", ref->label().c_str(),
+                         streams ? "; frame/same: against Embree MEDIUM with the row's tracer" : "");
+    for (const Entry& e : entries)
+        if (e.tracer == TracerKind::Stream)
+            std::printf("%s: sorting %.1f%% of the frame, stream memory %.1f MB (all threads)\n", e.label().c_str(),
+                        100.0 * e.sort_share(), double(e.stream->bytes.load()) / 1e6);
 }
 
 nlohmann::json to_json(const std::vector<Entry>& entries, const BenchOptions& o, uint64_t tris) {
@@ -150,6 +196,9 @@ nlohmann::json to_json(const std::vector<Entry>& entries, const BenchOptions& o,
                            {"reason", e.accel->reason().empty() ? nlohmann::json(nullptr) : nlohmann::json(e.accel->reason())},
                            {"frames_planned", e.accel->frames_planned() ? nlohmann::json(e.accel->frames_planned()) : nlohmann::json(nullptr)},
                            {"quality", canopy ? nlohmann::json(nullptr) : nlohmann::json(e.accel->quality())},
+                           {"tracer", tracer_name(e.tracer)},
+                           {"sort_share", e.tracer == TracerKind::Stream ? nlohmann::json(e.sort_share()) : nlohmann::json(nullptr)},
+                           {"stream_bytes", e.tracer == TracerKind::Stream ? nlohmann::json(e.stream->bytes.load()) : nlohmann::json(nullptr)},
                            {"build_ms_min", e.build_min()},
                            {"build_ms_median", median(e.build_ms)},
                            {"mprims_per_s", double(tris) / e.build_min() / 1e3},
@@ -174,19 +223,22 @@ nlohmann::json to_json(const std::vector<Entry>& entries, const BenchOptions& o,
                                                  {"256", e.build_min() + 256 * frame}}}});
     }
     return {{"scene", o.scene}, {"tris", tris}, {"threads", o.threads}, {"width", o.width},
-            {"height", o.height}, {"bounces", o.bounces}, {"results", results}};
+            {"height", o.height}, {"bounces", o.bounces}, {"stream_paths", o.stream_paths}, {"results", results}};
 }
 
 // Builds every entry `builds` times, alternating between them; the minimum is reported.
 void build_all(std::vector<Entry>& entries, int builds) {
     for (int round = 0; round < builds; ++round) {
-        for (Entry& e : entries) {
-            e.accel->prepare();
+        for (size_t i = 0; i < entries.size(); ++i) {
+            if (!builds_its_accelerator(entries, i)) continue;
+            entries[i].accel->prepare();
             const auto start = Clock::now();
-            e.accel->build();
-            e.build_ms.push_back(ms_since(start));
+            entries[i].accel->build();
+            entries[i].build_ms.push_back(ms_since(start));
         }
     }
+    for (size_t i = 0; i < entries.size(); ++i)
+        if (!builds_its_accelerator(entries, i)) entries[i].build_ms = entries[i - 1].build_ms;
 }
 
 // Dynamic-in-static (Benthin et al. 2017, sec. 6.3): the object takes its place for `frame` in the flat scene,
@@ -204,19 +256,24 @@ void move_all(std::vector<Entry>& entries, const DynamicObject& object, uint32_t
 // before each timed frame (the warm-up shows it at rest, as built).
 void render_frames(std::vector<Entry>& entries, const Scene& scene, FlatScene& flat, const BenchOptions& o,
                    const DynamicObject* dynamic) {
-    FrameSettings settings;
-    settings.width = o.width, settings.height = o.height, settings.max_bounces = o.bounces;
-    settings.material_albedo = o.material_albedo;
-    const ShadingScene shading{flat, settings};
+    FrameSettings single, stream;
+    single.width = o.width, single.height = o.height, single.max_bounces = o.bounces;
+    single.material_albedo = o.material_albedo;
+    stream = single;
+    stream.tracer = TracerKind::Stream, stream.stream_paths = o.stream_paths;
+    std::vector<ShadingScene> shading;
+    for (const Entry& e : entries)
+        shading.push_back(e.tracer == TracerKind::Stream ? ShadingScene{flat, stream, e.stream.get()} : ShadingScene{flat, single});
     const PinholeCamera camera(scene_camera(scene, flat), o.width, o.height);
     std::vector<Image> images(entries.size(), Image(o.width, o.height));
-    for (size_t i = 0; i < entries.size(); ++i) entries[i].accel->render(shading, camera, 0, images[i]);  // warm-up
+    for (size_t i = 0; i < entries.size(); ++i) entries[i].accel->render(shading[i], camera, 0, images[i]);  // warm-up
     for (Image& image : images) image.clear();
+    for (Entry& e : entries) e.stream->sort_ns = 0;
     for (int frame = 1; frame <= o.frames; ++frame) {
         if (dynamic) move_all(entries, *dynamic, uint32_t(frame), flat);
         for (size_t i = 0; i < entries.size(); ++i) {
             const auto start = Clock::now();
-            entries[i].rays += entries[i].accel->render(shading, camera, uint32_t(frame), images[i]);
+            entries[i].rays += entries[i].accel->render(shading[i], camera, uint32_t(frame), images[i]);
             entries[i].frame_ms.push_back(ms_since(start));
         }
     }
@@ -325,10 +382,13 @@ void run_bench(const BenchOptions& o) {
                     "frame; %d frames (mean) after 1 warm-up at rest, threads %s\n",
                     o.width, o.height, o.bounces, o.frames, o.threads ? std::to_string(o.threads).c_str() : "all");
     } else {
-        std::printf("protocol: %dx%d, %d bounces, %d builds (min), %d frames (mean) after 1 warm-up, threads %s\n",
-                    o.width, o.height, o.bounces, o.builds, o.frames, o.threads ? std::to_string(o.threads).c_str() : "all");
+        std::printf("protocol: %dx%d, %d bounces, %d builds (min), %d frames (mean) after 1 warm-up, threads %s%s\n",
+                    o.width, o.height, o.bounces, o.builds, o.frames, o.threads ? std::to_string(o.threads).c_str() : "all",
+                    std::count(o.tracers.begin(), o.tracers.end(), "stream")
+                        ? ("; stream batches of " + std::to_string(o.stream_paths) + " paths").c_str() : "");
     }
 
+    if (dynamic && o.tracers.size() > 1) throw std::invalid_argument("--dynamic takes one --tracer (its rows move their accelerator)");
     std::vector<Entry> entries = make_entries(scene, flat, o);
     build_all(entries, dynamic ? 1 : o.builds);
     render_frames(entries, scene, flat, o, dynamic ? &*dynamic : nullptr);

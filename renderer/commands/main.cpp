@@ -64,6 +64,10 @@ int main(int argc, char** argv) {
         ->check(CLI::IsMember({"robust", "fast"}))->capture_default_str();
     render->add_option("--intersector", r.intersector, "watertight (Woop et al. 2013) or moller (Möller–Trumbore, fast)")
         ->check(CLI::IsMember({"watertight", "moller"}))->capture_default_str();
+    render->add_option("--tracer", r.tracer, "single (one path at a time) or stream (each bounce's rays as one sorted batch)")
+        ->check(CLI::IsMember({"single", "stream"}))->capture_default_str();
+    render->add_option("--stream-paths", r.stream_paths, "Stream tracer: paths in flight per batch")
+        ->check(CLI::Range(1, 1 << 24))->capture_default_str();
     render->add_option("--collapse", r.collapse, "Binary tree to bvh4/bvh8: optimal (Ylitie et al. 2017) or greedy (largest area first)")
         ->check(CLI::IsMember({"optimal", "greedy"}))->capture_default_str();
 
@@ -99,6 +103,10 @@ int main(int argc, char** argv) {
         ->check(CLI::IsMember({"watertight", "moller"}))->capture_default_str();
     bench->add_option("--collapse", b.collapses, "Collapses of the binary tree to bvh4/bvh8: optimal (Ylitie et al. 2017), greedy (largest area first)")
         ->delimiter(',')->check(CLI::IsMember({"optimal", "greedy"}))->capture_default_str();
+    bench->add_option("--tracer", b.tracers, "Tracers: single (one path at a time), stream (each bounce's rays as one sorted batch)")
+        ->delimiter(',')->check(CLI::IsMember({"single", "stream"}))->capture_default_str();
+    bench->add_option("--stream-paths", b.stream_paths, "Stream tracer: paths in flight per batch")
+        ->check(CLI::Range(1, 1 << 24))->capture_default_str();
     std::string dynamic;
     CLI::Option* dynamic_option =
         bench->add_option("--dynamic", dynamic,

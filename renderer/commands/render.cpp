@@ -65,6 +65,8 @@ void run_render(RenderOptions o) {
     FrameSettings settings;
     settings.width = o.size[0], settings.height = o.size[1], settings.max_bounces = o.bounces;
     settings.material_albedo = o.material_albedo;
+    settings.tracer = o.tracer == "stream" ? TracerKind::Stream : TracerKind::Single;
+    settings.stream_paths = o.stream_paths;
     const ShadingScene shading{flat, settings};
     Image image(o.size[0], o.size[1]);
     const bool terminal = isatty(fileno(stderr));

@@ -16,6 +16,8 @@ struct RenderOptions {
     std::vector<int> size{1024, 768};
     bool material_albedo = false, heatmap = false;
     std::string traversal = "robust", intersector = "watertight", collapse = "optimal";
+    std::string tracer = "single";       // single (one path at a time) or stream (wavefront, sorted ray batches)
+    uint32_t stream_paths = 1u << 16;    // stream: paths in flight per batch
 };
 
 // Every registered builder's name, for the options' help.

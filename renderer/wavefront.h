@@ -1,0 +1,130 @@
+#pragma once
+// The wavefront path tracer (`--tracer stream`): the frame's pixels in batches of FrameSettings::stream_paths
+// paths, each batch on one thread; a batch's live paths advance one bounce at a time: their rays are sorted
+// (kernels/ray_order.h), traced as one batch through the tracer's batch query, shaded by the same shade_bounce as
+// the single-path tracer, and the paths still alive compacted for the next bounce. A path keeps its own random
+// numbers, drawn in the same order as under `single`, so with an exact batch query every path, and so the image
+// and the ray count, are the single-path tracer's (up to exact ties between triangles).
+//
+// A batch tracer has `Scratch` (its per-thread memory, with `bytes()`) and
+// `void closest(std::span<const Ray>, std::span<Hit>, Scratch&) const`.
+#include "kernels/ray_order.h"
+#include "renderer/path_tracer.h"
+
+#include <tbb/enumerable_thread_specific.h>
+
+#include <atomic>
+#include <chrono>
+#include <span>
+
+namespace canopy {
+
+// What a stream frame cost besides tracing: filled in by render_frame_stream when the caller asks.
+struct StreamStats {
+    std::atomic<uint64_t> sort_ns{0};   // summed over threads: computing keys and permuting rays and paths
+    std::atomic<uint64_t> bytes{0};     // the largest per-thread memory (paths, rays, hits, keys, tracer scratch), times threads
+};
+
+namespace detail {
+
+struct StreamPath {
+    PathState state;
+    Rng rng{0, 0};  // reseeded for its pixel when the path starts
+    uint32_t pixel = 0;
+};
+
+// A thread's batch: paths and their current rays (double-buffered for the sort), hits, keys.
+template <class Scratch>
+struct Wavefront {
+    std::vector<StreamPath> paths, sorted_paths;
+    std::vector<Ray> rays, sorted_rays;
+    std::vector<Hit> hits;
+    std::vector<uint32_t> keys, order, radix_scratch;
+    Scratch scratch;
+
+    size_t bytes() const {
+        return (paths.capacity() + sorted_paths.capacity()) * sizeof(StreamPath) +
+               (rays.capacity() + sorted_rays.capacity()) * sizeof(Ray) + hits.capacity() * sizeof(Hit) +
+               (keys.capacity() + order.capacity() + radix_scratch.capacity()) * sizeof(uint32_t) + scratch.bytes();
+    }
+
+    // The first `live` paths and rays in key order.
+    void sort(uint32_t live, const RayOrderKey& key) {
+        keys.resize(live);
+        for (uint32_t i = 0; i < live; ++i) keys[i] = key(rays[i]);
+        radix_order(keys, order, radix_scratch);
+        sorted_paths.resize(live);
+        sorted_rays.resize(live);
+        for (uint32_t i = 0; i < live; ++i) {
+            sorted_paths[i] = paths[order[i]];
+            sorted_rays[i] = rays[order[i]];
+        }
+        paths.swap(sorted_paths);
+        rays.swap(sorted_rays);
+    }
+};
+
+}  // namespace detail
+
+// Renders one sample per pixel of frame `frame` into `accumulated`, as render_frame does, through the tracer's batch
+// query. Returns rays traced. `on_batch` (optional) is called after each batch with the fraction of the frame done.
+template <class BatchTracer>
+uint64_t render_frame_stream(const BatchTracer& tracer, const ShadingScene& scene, const PinholeCamera& camera,
+                             uint32_t frame, Image& accumulated, const std::function<void(float)>& on_batch = {}) {
+    StreamStats* const stats = scene.stream_stats;
+    using Wavefront = detail::Wavefront<typename BatchTracer::Scratch>;
+    const int w = scene.settings.width;
+    const uint64_t pixels = uint64_t(w) * uint64_t(scene.settings.height);
+    const uint64_t batch = std::max<uint32_t>(1, scene.settings.stream_paths);
+    const uint64_t batches = (pixels + batch - 1) / batch;
+    const RayOrderKey key(scene.flat.bounds);
+    static tbb::enumerable_thread_specific<Wavefront> wavefronts;  // reused from frame to frame
+    std::atomic<uint64_t> rays{0}, done{0}, sort_ns{0};
+    tbb::parallel_for(uint64_t(0), batches, [&](uint64_t b) {
+        Wavefront& wf = wavefronts.local();
+        const uint64_t first = b * batch;
+        uint32_t live = uint32_t(std::min(batch, pixels - first));
+        wf.paths.resize(live);
+        wf.rays.resize(live);
+        for (uint32_t i = 0; i < live; ++i) {
+            const uint32_t pixel = uint32_t(first + i);
+            const int x = int(pixel % uint32_t(w)), y = int(pixel / uint32_t(w));
+            wf.paths[i] = {PathState{}, Rng(uint64_t(y) * uint64_t(w) + uint64_t(x), frame), pixel};
+            const float u = wf.paths[i].rng.next_float(), v = wf.paths[i].rng.next_float();
+            wf.rays[i] = camera.generate(x, y, u, v);
+        }
+        uint64_t traced = 0, sorting = 0;
+        for (int depth = 0; live > 0; ++depth) {
+            const auto sort_start = std::chrono::steady_clock::now();
+            wf.sort(live, key);
+            sorting += uint64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - sort_start).count());
+            wf.hits.resize(live);
+            tracer.closest(std::span<const Ray>(wf.rays.data(), live), std::span<Hit>(wf.hits.data(), live), wf.scratch);
+            traced += live;
+            uint32_t next_live = 0;
+            for (uint32_t i = 0; i < live; ++i) {
+                detail::StreamPath& path = wf.paths[i];
+                Ray next;
+                if (shade_bounce(scene, wf.rays[i], wf.hits[i], wf.hits[i].found(), depth, path.state, path.rng, next)) {
+                    wf.paths[next_live] = path;
+                    wf.rays[next_live++] = next;
+                } else {
+                    accumulated.add(int(path.pixel % uint32_t(w)), int(path.pixel / uint32_t(w)), path.state.radiance);
+                }
+            }
+            live = next_live;
+        }
+        rays += traced;
+        sort_ns += sorting;
+        if (stats) {
+            uint64_t seen = stats->bytes.load();
+            const uint64_t all = wf.bytes() * uint64_t(tbb::this_task_arena::max_concurrency());
+            while (all > seen && !stats->bytes.compare_exchange_weak(seen, all)) {}
+        }
+        if (on_batch) on_batch(float(done.fetch_add(1) + 1) / float(batches));
+    });
+    if (stats) stats->sort_ns += sort_ns;
+    return rays;
+}
+
+}  // namespace canopy
