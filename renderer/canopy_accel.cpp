@@ -23,8 +23,9 @@ template <class Layout, bool Robust, class TriangleTest>
 struct CanopyBatchTracer {
     using Scratch = StreamScratch<Layout::kWidth>;
     const Layout& bvh;
+    BatchTraversal how;
     void closest(std::span<const Ray> rays, std::span<Hit> hits, Scratch& scratch) const {
-        traverse_batch<Query::Closest, Robust, TriangleTest>(bvh, rays, hits, scratch);
+        traverse_batch<Query::Closest, Robust, TriangleTest>(bvh, rays, hits, scratch, how);
     }
 };
 
@@ -179,7 +180,7 @@ public:
         return with_kernel([&]<int N, bool Robust, class Test>(const auto& bvh) {
             using Layout = std::decay_t<decltype(bvh)>;
             if (scene.settings.tracer == TracerKind::Stream)
-                return render_frame_stream(CanopyBatchTracer<Layout, Robust, Test>{bvh}, scene, camera, frame, image, on_tile);
+                return render_frame_stream(CanopyBatchTracer<Layout, Robust, Test>{bvh, scene.settings.stream_traversal ? BatchTraversal::Stream : BatchTraversal::Single}, scene, camera, frame, image, on_tile);
             return render_frame(CanopyTracer<Layout, Robust, Test>{bvh}, scene, camera, frame, image, on_tile);
         });
     }

@@ -23,6 +23,7 @@ struct FrameSettings {
     int width = 1024, height = 768;
     TracerKind tracer = TracerKind::Single;
     uint32_t stream_paths = 1u << 16;  // stream: paths in flight per batch (each batch on one thread)
+    bool stream_traversal = false;     // stream: canopy's batches by ray-stream traversal, not ray by ray
     int max_bounces = 8;           // at most max_bounces + 1 closest-hit rays per path
     bool material_albedo = false;  // protocol: albedo 0.8 everywhere unless the scene asks for Kd
     float albedo = 0.8f;

@@ -260,7 +260,7 @@ void render_frames(std::vector<Entry>& entries, const Scene& scene, FlatScene& f
     single.width = o.width, single.height = o.height, single.max_bounces = o.bounces;
     single.material_albedo = o.material_albedo;
     stream = single;
-    stream.tracer = TracerKind::Stream, stream.stream_paths = o.stream_paths;
+    stream.tracer = TracerKind::Stream, stream.stream_paths = o.stream_paths, stream.stream_traversal = o.stream_traversal;
     std::vector<ShadingScene> shading;
     for (const Entry& e : entries)
         shading.push_back(e.tracer == TracerKind::Stream ? ShadingScene{flat, stream, e.stream.get()} : ShadingScene{flat, single});
@@ -385,7 +385,8 @@ void run_bench(const BenchOptions& o) {
         std::printf("protocol: %dx%d, %d bounces, %d builds (min), %d frames (mean) after 1 warm-up, threads %s%s\n",
                     o.width, o.height, o.bounces, o.builds, o.frames, o.threads ? std::to_string(o.threads).c_str() : "all",
                     std::count(o.tracers.begin(), o.tracers.end(), "stream")
-                        ? ("; stream batches of " + std::to_string(o.stream_paths) + " paths").c_str() : "");
+                        ? ("; stream batches of " + std::to_string(o.stream_paths) + " paths, canopy's traced " +
+                           (o.stream_traversal ? "as ray streams" : "ray by ray")).c_str() : "");
     }
 
     if (dynamic && o.tracers.size() > 1) throw std::invalid_argument("--dynamic takes one --tracer (its rows move their accelerator)");

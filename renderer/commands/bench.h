@@ -18,6 +18,7 @@ struct BenchOptions {
     std::vector<std::string> embree_qualities;  // empty: no Embree rows
     std::vector<std::string> tracers{"single"};  // single, stream: a row each per accelerator, built once
     uint32_t stream_paths = 1u << 16;            // stream: paths in flight per batch
+    bool stream_traversal = false;               // stream: canopy's batches by ray-stream traversal
     int builds = 20;
     int frames = 10;
     std::vector<int> frames_planned{16};  // `--builder auto` rows: one per value, each planning for that many frames

@@ -68,6 +68,7 @@ int main(int argc, char** argv) {
         ->check(CLI::IsMember({"single", "stream"}))->capture_default_str();
     render->add_option("--stream-paths", r.stream_paths, "Stream tracer: paths in flight per batch")
         ->check(CLI::Range(1, 1 << 24))->capture_default_str();
+    render->add_flag("--stream-traversal", r.stream_traversal, "Stream tracer: trace each batch as ray streams (default: ray by ray)");
     render->add_option("--collapse", r.collapse, "Binary tree to bvh4/bvh8: optimal (Ylitie et al. 2017) or greedy (largest area first)")
         ->check(CLI::IsMember({"optimal", "greedy"}))->capture_default_str();
 
@@ -107,6 +108,7 @@ int main(int argc, char** argv) {
         ->delimiter(',')->check(CLI::IsMember({"single", "stream"}))->capture_default_str();
     bench->add_option("--stream-paths", b.stream_paths, "Stream tracer: paths in flight per batch")
         ->check(CLI::Range(1, 1 << 24))->capture_default_str();
+    bench->add_flag("--stream-traversal", b.stream_traversal, "Stream tracer: canopy traces each batch as ray streams (default: ray by ray)");
     std::string dynamic;
     CLI::Option* dynamic_option =
         bench->add_option("--dynamic", dynamic,
