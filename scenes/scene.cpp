@@ -91,6 +91,8 @@ FlatScene flatten(const Scene& scene) {
     if (with_materials) {
         flat.materials = scene.materials;
         flat.material.reserve(flat.triangles.size());
+        flat.has_emitters = std::any_of(scene.materials.begin(), scene.materials.end(),
+                                        [](const Material& m) { return m.emission != Vec3(0.0f); });
     }
     size_t offset = 0;
     for (const Instance& instance : scene.instances) {
