@@ -41,7 +41,7 @@ int main(int argc, char** argv) {
 
     RenderOptions r;
     CLI::App* render = app.add_subcommand("render", "Render a scene to an EXR");
-    render->add_option("scene", r.scene, "Scene: scene.json, .obj or gen:NAME?tris=N&seed=S (default: embedded scene)");
+    render->add_option("scene", r.scene, "Scene: scene.json, .obj, .gltf, .glb or gen:NAME?tris=N&seed=S (default: embedded scene)");
     render->add_option("-o,--output", r.output, "Output EXR")->capture_default_str();
     render->add_option("--spp", r.spp, "Samples (frames) per pixel")->check(CLI::Range(1, 1 << 20))->capture_default_str();
     render->add_option("--size", r.size, "Width and height")->expected(2)->check(CLI::Range(1, 16384))->capture_default_str();
@@ -71,7 +71,7 @@ int main(int argc, char** argv) {
     std::vector<std::string> accels;
     std::vector<std::string> qualities{"medium"};
     CLI::App* bench = app.add_subcommand("bench", "Benchmark builders and kernels against Embree (BENCHMARK.md)");
-    bench->add_option("scene", b.scene, "Scene: scene.json, .obj or gen:NAME?tris=N&seed=S")->required();
+    bench->add_option("scene", b.scene, "Scene: scene.json, .obj, .gltf, .glb or gen:NAME?tris=N&seed=S")->required();
     bench->add_option("--builder", b.builders, "Builders: " + builder_names())->delimiter(',')->capture_default_str();
     bench->add_option("--start", b.start, "Optimisers among the builders: builder of their start tree");
     bench->add_option("--toplevel", b.toplevels, "Top levels: flat, two-level (object BVHs under a BVH over instances), rebraid (Benthin 2017)")
@@ -112,7 +112,7 @@ int main(int argc, char** argv) {
     StudyOptions st;
     std::vector<int> study_size{256, 192};
     CLI::App* study = app.add_subcommand("study", "SAH, EPO and LCV against measured ns/ray for every builder (Aila et al. 2013)");
-    study->add_option("scenes", st.scenes, "Scenes: scene.json, .obj or gen:NAME?tris=N&seed=S")->required();
+    study->add_option("scenes", st.scenes, "Scenes: scene.json, .obj, .gltf, .glb or gen:NAME?tris=N&seed=S")->required();
     study->add_option("--builder", st.builders, "Builders (default: all): " + builder_names())->delimiter(',');
     study->add_option("--size", study_size, "Width and height of the frame whose diffuse rays are timed")
         ->expected(2)->check(CLI::Range(1, 16384))->capture_default_str();
@@ -124,7 +124,7 @@ int main(int argc, char** argv) {
     std::vector<std::string> tradeoff_accels;
     std::vector<int> tradeoff_size{tr.width, tr.height};
     CLI::App* tradeoff = app.add_subcommand("tradeoff", "Time to image against RMSE per builder, against a converged reference");
-    tradeoff->add_option("scene", tr.scene, "Scene: scene.json, .obj or gen:NAME?tris=N&seed=S")->required();
+    tradeoff->add_option("scene", tr.scene, "Scene: scene.json, .obj, .gltf, .glb or gen:NAME?tris=N&seed=S")->required();
     tradeoff->add_option("--builder", tr.builders, "Builders: " + builder_names())->delimiter(',')->capture_default_str();
     tradeoff->add_option("--kernel", tr.kernel, "Kernel: auto (widest), bvh2, bvh4, bvh8")->capture_default_str();
     tradeoff->add_option("--accel", tradeoff_accels, "Also Embree, at the --embree-quality levels")->delimiter(',')
