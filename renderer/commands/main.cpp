@@ -57,7 +57,8 @@ int main(int argc, char** argv) {
     render->add_option("--embree-quality", r.embree_quality, "low, medium or high")->capture_default_str();
     render->add_option("--bounces", r.bounces, "Maximum bounces")->check(CLI::Range(0, 1024))->capture_default_str();
     render->add_option("--threads", threads, "Threads for every library (0: all)")->check(CLI::Range(0, 4096));
-    render->add_flag("--materials", r.material_albedo, "Use the .mtl Kd colours as albedo (protocol: 0.8 grey)");
+    render->add_flag("--materials", r.material_albedo,
+                     "Use the materials: Kd or baseColorFactor as albedo, Ke or emissiveFactor as light (protocol: 0.8 grey, sky only)");
     render->add_flag("--heatmap", r.heatmap,
                      "Instead of rendering, write what primary rays visit: EXR channels inner, leaves, triangles, and a false-colour PNG beside it");
     render->add_option("--traversal", r.traversal, "robust (padded slab test, Ize 2013) or fast")
@@ -92,7 +93,7 @@ int main(int argc, char** argv) {
     bench->add_option("--json", b.json_path, "Write results as JSON");
     bench->add_flag("!--no-epo", b.epo, "Skip EPO in the report (minutes on millions of triangles)");
     bench->add_option("--threads", threads, "Threads for every library (0: all)")->check(CLI::Range(0, 4096));
-    bench->add_flag("--materials", b.material_albedo, "Use the .mtl Kd colours as albedo");
+    bench->add_flag("--materials", b.material_albedo, "Use the materials: Kd or baseColorFactor as albedo, Ke or emissiveFactor as light");
     bench->add_option("--traversal", b.traversals, "Traversal modes: robust, fast")->delimiter(',')
         ->check(CLI::IsMember({"robust", "fast"}))->capture_default_str();
     bench->add_option("--intersector", b.intersectors, "Intersectors: watertight, moller (Möller–Trumbore)")->delimiter(',')
@@ -136,7 +137,7 @@ int main(int argc, char** argv) {
     tradeoff->add_option("--reference-spp", tr.reference_spp, "Samples of the cached reference")->check(CLI::Range(1, 1 << 20))->capture_default_str();
     tradeoff->add_option("--size", tradeoff_size, "Width and height")->expected(2)->check(CLI::Range(1, 16384))->capture_default_str();
     tradeoff->add_option("--bounces", tr.bounces, "Maximum bounces")->check(CLI::Range(0, 1024))->capture_default_str();
-    tradeoff->add_flag("--materials", tr.material_albedo, "Use the .mtl Kd colours as albedo");
+    tradeoff->add_flag("--materials", tr.material_albedo, "Use the materials: Kd or baseColorFactor as albedo, Ke or emissiveFactor as light");
     tradeoff->add_option("-o,--output", tr.output, "Output stem: STEM.json, STEM.csv, STEM.png, cached reference beside")->capture_default_str();
     tradeoff->add_option("--threads", threads, "Threads for every library (0: all)")->check(CLI::Range(0, 4096));
 
