@@ -8,6 +8,7 @@
 #include <cmath>
 #include <functional>
 #include <iterator>
+#include <random>
 
 using namespace canopy;
 using canopy::test::input_error_of;
@@ -331,27 +332,50 @@ TEST_CASE("load_gltf rejects out-of-range indices and non-finite positions in th
                Contains("nan.glb: accessors[0]") && Contains("position 1 is not finite"));
 }
 
-TEST_CASE("load_gltf names the file when it is missing, truncated, not JSON, or its buffer is absent",
+TEST_CASE("load_gltf names the file when it is missing, truncated anywhere, or its buffer is absent",
           "[scenes][gltf][errors]") {
     TempDir dir;
     CHECK_THAT(input_error_of([&] { load_gltf(dir.file("absent.gltf")); }), Contains("absent.gltf: no such file"));
     CHECK_THAT(input_error_of([&] { load_gltf(dir.write("text.gltf", "{\"asset\": ")); }), Contains("text.gltf: "));
 
     GltfBuilder gltf = two_placements();
-    const std::string glb = gltf.write_glb(dir, "whole.glb");
-    std::string bytes;
-    {
-        std::ifstream in(glb, std::ios::binary);
-        bytes.assign(std::istreambuf_iterator<char>(in), {});
-    }
-    for (const size_t length : {size_t(0), size_t(10), size_t(30), bytes.size() - 8, bytes.size() - 1}) {
-        INFO("truncated to " << length << " of " << bytes.size() << " bytes");
-        CHECK_THAT(input_error_of([&] { load_gltf(dir.write("cut.glb", bytes.substr(0, length))); }),
-                   Contains("cut.glb: "));
+    // Cut anywhere: in the header, a chunk header, the JSON or the binary data.
+    const std::pair<std::string, std::string> files[] = {{gltf.write_glb(dir, "whole.glb"), "cut.glb"},
+                                                         {gltf.write_gltf(dir, "whole.gltf"), "cut.gltf"}};
+    for (const auto& [whole, cut] : files) {
+        std::ifstream in(whole, std::ios::binary);
+        const std::string bytes{std::istreambuf_iterator<char>(in), {}};
+        for (size_t length = 0; length < bytes.size(); ++length) {
+            INFO(cut << " truncated to " << length << " of " << bytes.size() << " bytes");
+            CHECK_THAT(input_error_of([&] { load_gltf(dir.write(cut, bytes.substr(0, length))); }), Contains(cut + ": "));
+        }
     }
 
     gltf.write_gltf_and_bin(dir, "lost.gltf");
     std::filesystem::remove(dir.file("lost.gltf.bin"));
     CHECK_THAT(input_error_of([&] { load_gltf(dir.file("lost.gltf")); }),
                Contains("lost.gltf: ") && Contains("lost.gltf.bin"));
+}
+
+TEST_CASE("load_gltf survives damaged bytes anywhere: the file loads or is an InputError, never a crash",
+          "[scenes][gltf][errors]") {
+    TempDir dir;
+    GltfBuilder gltf = two_placements();
+    for (const std::string& whole : {gltf.write_glb(dir, "whole.glb"), gltf.write_gltf(dir, "whole.gltf")}) {
+        std::ifstream in(whole, std::ios::binary);
+        const std::string bytes{std::istreambuf_iterator<char>(in), {}};
+        const std::string damaged_name = "damaged" + std::filesystem::path(whole).extension().string();
+        std::mt19937 rng(1);
+        for (int trial = 0; trial < 1000; ++trial) {
+            std::string damaged = bytes;
+            // Random bytes, or JSON's digits and delimiters, which keep the parser going into the fields.
+            for (uint32_t k = 0, n = 1 + rng() % 3; k < n; ++k)
+                damaged[rng() % damaged.size()] = rng() % 2 ? char(rng()) : "0123456789-.e,]}\""[rng() % 17];
+            INFO(damaged_name << ", trial " << trial);
+            try {
+                load_gltf(dir.write(damaged_name, damaged));
+            } catch (const InputError&) {  // any other exception fails the test
+            }
+        }
+    }
 }
