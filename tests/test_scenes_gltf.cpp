@@ -347,7 +347,8 @@ TEST_CASE("load_gltf names the file when it is missing, truncated anywhere, or i
         const std::string bytes{std::istreambuf_iterator<char>(in), {}};
         for (size_t length = 0; length < bytes.size(); ++length) {
             INFO(cut << " truncated to " << length << " of " << bytes.size() << " bytes");
-            CHECK_THAT(input_error_of([&] { load_gltf(dir.write(cut, bytes.substr(0, length))); }), Contains(cut + ": "));
+            CHECK_THAT(input_error_of([&] { load_gltf(dir.write(cut, bytes.substr(0, length))); }),
+                       Contains(cut + ": "));
         }
     }
 
