@@ -35,11 +35,15 @@ struct ShadingScene {
     const FlatScene& flat;
     const FrameSettings& settings;
     StreamStats* stream_stats = nullptr;  // the stream tracer's sort time and memory, when the caller wants them
+    // Decided once per frame, so that the protocol's paths (no --materials) and scenes without lights pay one
+    // predictable branch per bounce and add nothing to their radiance.
+    bool emitters = settings.material_albedo && flat.has_emitters;
 
     Vec3 albedo(uint32_t prim) const {
         if (settings.material_albedo && !flat.material.empty()) return flat.materials[flat.material[prim]].kd;
         return Vec3(settings.albedo);
     }
+    Vec3 emission(uint32_t prim) const { return flat.materials[flat.material[prim]].emission; }
 };
 
 // A path's state between bounces: what it carries, what it has gathered, and its random numbers.
@@ -48,8 +52,9 @@ struct PathState {
 };
 
 // One bounce's shading, shared by every tracer so that `single` and `stream` paths mean the same: a miss adds the
-// white sky and ends the path; a hit takes the albedo and, unless `depth` was the last bounce, turns `ray` into
-// the next bounce's ray. Returns whether the path goes on.
+// white sky and ends the path; a hit adds what its material emits (under --materials; no next-event estimation),
+// takes the albedo and, unless `depth` was the last bounce, turns `ray` into the next bounce's ray. Returns whether
+// the path goes on.
 [[gnu::always_inline]] inline bool shade_bounce(const ShadingScene& scene, const Ray& ray, const Hit& hit, bool found,
                                                 int depth, PathState& path, Rng& rng, Ray& next) {
     if (!found) {
@@ -61,6 +66,7 @@ struct PathState {
     const float len2 = glm::dot(n, n);
     n = len2 > 0.0f && std::isfinite(len2) ? n / std::sqrt(len2) : -ray.dir;
     if (glm::dot(n, ray.dir) > 0.0f) n = -n;
+    if (scene.emitters) path.radiance += path.throughput * scene.emission(hit.prim);
     path.throughput *= scene.albedo(hit.prim);
     if (depth == scene.settings.max_bounces) return false;
     const Vec3 p = tri.v0 + hit.u * (tri.v1 - tri.v0) + hit.v * (tri.v2 - tri.v0);

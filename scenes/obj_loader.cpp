@@ -202,7 +202,8 @@ ParsedObj parse_with_tinyobj(const std::string& path, std::string text) {
 std::vector<Material> to_materials(const std::vector<tinyobj::material_t>& parsed) {
     std::vector<Material> materials;
     for (const tinyobj::material_t& m : parsed)
-        materials.push_back({m.name, Vec3(m.diffuse[0], m.diffuse[1], m.diffuse[2])});
+        materials.push_back({m.name, Vec3(m.diffuse[0], m.diffuse[1], m.diffuse[2]),
+                             Vec3(m.emission[0], m.emission[1], m.emission[2])});
     return materials;
 }
 

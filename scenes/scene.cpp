@@ -14,20 +14,14 @@
 namespace canopy {
 namespace {
 
-std::string lowercase_extension(const std::string& name) {
-    std::string extension = std::filesystem::path(name).extension().string();
-    std::transform(extension.begin(), extension.end(), extension.begin(),
-                   [](unsigned char c) { return char(std::tolower(c)); });
-    return extension;
-}
-
 Scene load_by_kind(const std::string& name) {
     if (name.empty()) return default_scene();
     if (name.starts_with("gen:")) return generate_scene(name);
     const std::string extension = lowercase_extension(name);
     if (extension == ".json") return load_scene_json(name);
     if (extension == ".obj") return load_obj(name);
-    throw InputError("'" + name + "': not a scene: expected a .json or .obj file or a gen:NAME spec");
+    if (is_gltf(name)) return load_gltf(name);
+    throw InputError("'" + name + "': not a scene: expected a .json, .obj, .gltf or .glb file or a gen:NAME spec");
 }
 
 std::vector<Vec3> transformed(const std::vector<Vec3>& positions, const glm::mat4& transform) {
@@ -71,6 +65,34 @@ void append_materials(const Mesh& mesh, FlatScene& flat) {
 
 }  // namespace
 
+std::string lowercase_extension(const std::string& path) {
+    std::string extension = std::filesystem::path(path).extension().string();
+    std::transform(extension.begin(), extension.end(), extension.begin(),
+                   [](unsigned char c) { return char(std::tolower(c)); });
+    return extension;
+}
+
+bool is_gltf(const std::string& path) {
+    const std::string extension = lowercase_extension(path);
+    return extension == ".gltf" || extension == ".glb";
+}
+
+Mesh baked_mesh(const Scene& scene) {
+    Mesh baked;
+    baked.name = scene.name;
+    for (const Instance& instance : scene.instances) {
+        const Mesh& mesh = scene.meshes.at(instance.mesh);
+        const auto first_vertex = uint32_t(baked.positions.size()), first_triangle = uint32_t(baked.triangles.size());
+        const std::vector<Vec3> world = transformed(mesh.positions, instance.transform);
+        baked.positions.insert(baked.positions.end(), world.begin(), world.end());
+        for (const glm::uvec3& t : mesh.triangles) baked.triangles.push_back(t + first_vertex);
+        baked.triangle_material.insert(baked.triangle_material.end(), mesh.triangle_material.begin(), mesh.triangle_material.end());
+        for (const Object& object : mesh.objects)
+            baked.objects.push_back({object.name, first_triangle + object.first_triangle, object.triangle_count});
+    }
+    return baked;
+}
+
 Scene load_scene(const std::string& name) {
     Scene scene = load_by_kind(name);
     if (instanced_triangle_count(scene) == 0)
@@ -91,6 +113,8 @@ FlatScene flatten(const Scene& scene) {
     if (with_materials) {
         flat.materials = scene.materials;
         flat.material.reserve(flat.triangles.size());
+        flat.has_emitters = std::any_of(scene.materials.begin(), scene.materials.end(),
+                                        [](const Material& m) { return m.emission != Vec3(0.0f); });
     }
     size_t offset = 0;
     for (const Instance& instance : scene.instances) {

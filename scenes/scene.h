@@ -28,6 +28,7 @@ struct Camera {
 struct Material {
     std::string name;
     Vec3 kd{0.8f};
+    Vec3 emission{0.0f};  // radiance emitted (OBJ Ke, glTF emissiveFactor): an area light under --materials
 };
 
 // One OBJ o/g group; may be empty (triangle_count 0), kept so counts match the README: a two-level builder skips it.
@@ -63,6 +64,7 @@ struct FlatScene {
     std::vector<Triangle> triangles;
     std::vector<uint32_t> material;  // per triangle, or empty when the scene has no materials
     std::vector<Material> materials;
+    bool has_emitters = false;  // some material emits: only then does shading look emission up
     BBox bounds;
 };
 

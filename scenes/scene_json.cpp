@@ -175,16 +175,16 @@ std::map<std::string, uint32_t> load_meshes(const SceneFile& file, const json& m
         const std::string name = file.text(file.required(meshes[i], field, "name"), field + ".name");
         const std::string relative = file.text(file.required(meshes[i], field, "file"), field + ".file");
         if (index_of.count(name)) file.fail(field + ".name", "'" + name + "' names two meshes");
-        const std::string obj_path = (directory / relative).string();
+        const std::string mesh_path = (directory / relative).string();
         std::error_code error;
-        if (!fs::is_regular_file(obj_path, error)) file.fail(field + ".file", "mesh file " + obj_path + " does not exist");
+        if (!fs::is_regular_file(mesh_path, error)) file.fail(field + ".file", "mesh file " + mesh_path + " does not exist");
         Scene part;
         try {
-            part = load_obj(obj_path);
+            part = is_gltf(mesh_path) ? load_gltf(mesh_path) : load_obj(mesh_path);
         } catch (const InputError& e) {
             file.fail(field + ".file", e.what());
         }
-        Mesh mesh = std::move(part.meshes.front());
+        Mesh mesh = is_gltf(mesh_path) ? baked_mesh(part) : std::move(part.meshes.front());
         mesh.name = name;
         for (uint32_t& material : mesh.triangle_material) material += uint32_t(scene.materials.size());
         scene.materials.insert(scene.materials.end(), part.materials.begin(), part.materials.end());

@@ -115,6 +115,17 @@ TEST_CASE("load_obj reads Kd, gives unmaterialled faces a default, warns once ab
     CHECK_THAT(warnings, Contains("grouped.obj") && Contains("3 texture file(s)"));
 }
 
+TEST_CASE("load_obj reads Ke as the material's emission, zero where the .mtl has none", "[scenes][obj]") {
+    TempDir dir;
+    dir.write("lit.mtl", "newmtl lamp\nKd 0.5 0.5 0.5\nKe 17 12 4\nnewmtl wall\nKd 1 1 1\n");
+    const Scene scene = load_obj(dir.write("lit.obj", "mtllib lit.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\n"
+                                                      "usemtl lamp\nf 1 2 3\nusemtl wall\nf 1 3 2\n"));
+    REQUIRE(scene.materials.size() == 2);
+    CHECK(scene.materials[0].emission == Vec3(17, 12, 4));
+    CHECK(scene.materials[1].emission == Vec3(0));
+    CHECK(flatten(scene).has_emitters);
+}
+
 TEST_CASE("load_obj without materials leaves triangle_material empty", "[scenes][obj]") {
     TempDir dir;
     const Scene plain = load_obj(dir.write("plain.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"));

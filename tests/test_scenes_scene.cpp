@@ -69,6 +69,10 @@ TEST_CASE("flatten carries materials, with a default for meshes that have none",
     REQUIRE(flat.materials.size() == 3);
     CHECK(flat.materials[2].kd == Vec3(0.8f));
     CHECK(flat.material == std::vector<uint32_t>{2, 1, 2});
+    CHECK_FALSE(flat.has_emitters);
+
+    scene.materials[1].emission = Vec3(0, 0, 1);
+    CHECK(flatten(scene).has_emitters);
 }
 
 TEST_CASE("flatten handles many triangles in parallel exactly as one by one", "[scenes][flatten]") {

@@ -41,7 +41,7 @@ int main(int argc, char** argv) {
 
     RenderOptions r;
     CLI::App* render = app.add_subcommand("render", "Render a scene to an EXR");
-    render->add_option("scene", r.scene, "Scene: scene.json, .obj or gen:NAME?tris=N&seed=S (default: embedded scene)");
+    render->add_option("scene", r.scene, "Scene: scene.json, .obj, .gltf, .glb or gen:NAME?tris=N&seed=S (default: embedded scene)");
     render->add_option("-o,--output", r.output, "Output EXR")->capture_default_str();
     render->add_option("--spp", r.spp, "Samples (frames) per pixel")->check(CLI::Range(1, 1 << 20))->capture_default_str();
     render->add_option("--size", r.size, "Width and height")->expected(2)->check(CLI::Range(1, 16384))->capture_default_str();
@@ -57,7 +57,8 @@ int main(int argc, char** argv) {
     render->add_option("--embree-quality", r.embree_quality, "low, medium or high")->capture_default_str();
     render->add_option("--bounces", r.bounces, "Maximum bounces")->check(CLI::Range(0, 1024))->capture_default_str();
     render->add_option("--threads", threads, "Threads for every library (0: all)")->check(CLI::Range(0, 4096));
-    render->add_flag("--materials", r.material_albedo, "Use the .mtl Kd colours as albedo (protocol: 0.8 grey)");
+    render->add_flag("--materials", r.material_albedo,
+                     "Use the materials: Kd or baseColorFactor as albedo, Ke or emissiveFactor as light (protocol: 0.8 grey, sky only)");
     render->add_flag("--heatmap", r.heatmap,
                      "Instead of rendering, write what primary rays visit: EXR channels inner, leaves, triangles, and a false-colour PNG beside it");
     render->add_option("--traversal", r.traversal, "robust (padded slab test, Ize 2013) or fast")
@@ -76,7 +77,7 @@ int main(int argc, char** argv) {
     std::vector<std::string> accels;
     std::vector<std::string> qualities{"medium"};
     CLI::App* bench = app.add_subcommand("bench", "Benchmark builders and kernels against Embree (BENCHMARK.md)");
-    bench->add_option("scene", b.scene, "Scene: scene.json, .obj or gen:NAME?tris=N&seed=S")->required();
+    bench->add_option("scene", b.scene, "Scene: scene.json, .obj, .gltf, .glb or gen:NAME?tris=N&seed=S")->required();
     bench->add_option("--builder", b.builders, "Builders: " + builder_names())->delimiter(',')->capture_default_str();
     bench->add_option("--start", b.start, "Optimisers among the builders: builder of their start tree");
     bench->add_option("--toplevel", b.toplevels, "Top levels: flat, two-level (object BVHs under a BVH over instances), rebraid (Benthin 2017)")
@@ -97,7 +98,7 @@ int main(int argc, char** argv) {
     bench->add_option("--json", b.json_path, "Write results as JSON");
     bench->add_flag("!--no-epo", b.epo, "Skip EPO in the report (minutes on millions of triangles)");
     bench->add_option("--threads", threads, "Threads for every library (0: all)")->check(CLI::Range(0, 4096));
-    bench->add_flag("--materials", b.material_albedo, "Use the .mtl Kd colours as albedo");
+    bench->add_flag("--materials", b.material_albedo, "Use the materials: Kd or baseColorFactor as albedo, Ke or emissiveFactor as light");
     bench->add_option("--traversal", b.traversals, "Traversal modes: robust, fast")->delimiter(',')
         ->check(CLI::IsMember({"robust", "fast"}))->capture_default_str();
     bench->add_option("--intersector", b.intersectors, "Intersectors: watertight, moller (Möller–Trumbore)")->delimiter(',')
@@ -122,7 +123,7 @@ int main(int argc, char** argv) {
     StudyOptions st;
     std::vector<int> study_size{256, 192};
     CLI::App* study = app.add_subcommand("study", "SAH, EPO and LCV against measured ns/ray for every builder (Aila et al. 2013)");
-    study->add_option("scenes", st.scenes, "Scenes: scene.json, .obj or gen:NAME?tris=N&seed=S")->required();
+    study->add_option("scenes", st.scenes, "Scenes: scene.json, .obj, .gltf, .glb or gen:NAME?tris=N&seed=S")->required();
     study->add_option("--builder", st.builders, "Builders (default: all): " + builder_names())->delimiter(',');
     study->add_option("--size", study_size, "Width and height of the frame whose diffuse rays are timed")
         ->expected(2)->check(CLI::Range(1, 16384))->capture_default_str();
@@ -134,7 +135,7 @@ int main(int argc, char** argv) {
     std::vector<std::string> tradeoff_accels;
     std::vector<int> tradeoff_size{tr.width, tr.height};
     CLI::App* tradeoff = app.add_subcommand("tradeoff", "Time to image against RMSE per builder, against a converged reference");
-    tradeoff->add_option("scene", tr.scene, "Scene: scene.json, .obj or gen:NAME?tris=N&seed=S")->required();
+    tradeoff->add_option("scene", tr.scene, "Scene: scene.json, .obj, .gltf, .glb or gen:NAME?tris=N&seed=S")->required();
     tradeoff->add_option("--builder", tr.builders, "Builders: " + builder_names())->delimiter(',')->capture_default_str();
     tradeoff->add_option("--kernel", tr.kernel, "Kernel: auto (widest), bvh2, bvh4, bvh8")->capture_default_str();
     tradeoff->add_option("--accel", tradeoff_accels, "Also Embree, at the --embree-quality levels")->delimiter(',')
@@ -146,7 +147,7 @@ int main(int argc, char** argv) {
     tradeoff->add_option("--reference-spp", tr.reference_spp, "Samples of the cached reference")->check(CLI::Range(1, 1 << 20))->capture_default_str();
     tradeoff->add_option("--size", tradeoff_size, "Width and height")->expected(2)->check(CLI::Range(1, 16384))->capture_default_str();
     tradeoff->add_option("--bounces", tr.bounces, "Maximum bounces")->check(CLI::Range(0, 1024))->capture_default_str();
-    tradeoff->add_flag("--materials", tr.material_albedo, "Use the .mtl Kd colours as albedo");
+    tradeoff->add_flag("--materials", tr.material_albedo, "Use the materials: Kd or baseColorFactor as albedo, Ke or emissiveFactor as light");
     tradeoff->add_option("-o,--output", tr.output, "Output stem: STEM.json, STEM.csv, STEM.png, cached reference beside")->capture_default_str();
     tradeoff->add_option("--threads", threads, "Threads for every library (0: all)")->check(CLI::Range(0, 4096));
 

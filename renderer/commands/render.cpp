@@ -26,6 +26,22 @@ void print_progress(float fraction) {
                  int(fraction * 100.0f + 0.5f));
 }
 
+namespace {
+
+std::string counted(size_t n, const char* one, const char* many) { return std::to_string(n) + " " + (n == 1 ? one : many); }
+
+// " in 2 instances of 1 mesh (1 object)" for a scene that places meshes more than once, else nothing: what a
+// two-level top level is built over.
+std::string instancing_summary(const Scene& scene) {
+    if (scene.instances.size() <= 1) return "";
+    size_t objects = 0;
+    for (const Mesh& mesh : scene.meshes) objects += mesh.objects.size();
+    return " in " + counted(scene.instances.size(), "instance", "instances") + " of " +
+           counted(scene.meshes.size(), "mesh", "meshes") + " (" + counted(objects, "object", "objects") + ")";
+}
+
+}  // namespace
+
 void check_blas_builder(const std::string& blas, const std::vector<std::string>& toplevels) {
     if (blas.empty()) return;
     if (std::none_of(toplevels.begin(), toplevels.end(), [](const std::string& t) { return t != "flat"; }))
@@ -81,8 +97,8 @@ void run_render(RenderOptions o) {
     if (terminal) std::fprintf(stderr, "\n");
     const double render_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - render_start).count();
     write_exr(o.output, o.size[0], o.size[1], image.average(o.spp));
-    std::printf("%s: %zu triangles, %s build %.1f ms, %d spp in %.2f s (%.2f Mrays/s), mean %.5f -> %s\n",
-                o.scene.empty() ? "default scene" : o.scene.c_str(), flat.triangles.size(),
+    std::printf("%s: %zu triangles%s, %s build %.1f ms, %d spp in %.2f s (%.2f Mrays/s), mean %.5f -> %s\n",
+                o.scene.empty() ? "default scene" : o.scene.c_str(), flat.triangles.size(), instancing_summary(scene).c_str(),
                 o.accel == "embree" ? ("embree " + o.embree_quality).c_str()
                                      : (accel->builder() + (accel->chosen().empty() ? "" : " -> " + accel->chosen())).c_str(),
                 build_ms, o.spp,
