@@ -1,10 +1,11 @@
 #pragma once
 // Batch queries: closest or any hit for a span of rays, each ray's answer exactly the single-ray kernel's. A batch
-// is traced ray by ray by the single-ray kernel (BatchTraversal::Single), or, for flat trees, as a ray stream
-// (BatchTraversal::Stream). On diffuse path rays sorted by ray_order.h the stream measured slower than the
-// single-ray kernel in the same order (crytek-sponza, 1 thread: 1.07x to 1.27x its batch time over chunk sizes of
-// 4k to 64k rays and fallback thresholds of 8 to 64 rays), so Single is the default; Stream is kept, tested, for
-// coherent rays and for further work.
+// is traced ray by ray by the single-ray kernel (BatchTraversal::Single), or, for flat trees, in packets of 8 rays
+// (BatchTraversal::Packet, traverse_packet.h) or as a ray stream (BatchTraversal::Stream). On the wavefront tracer's
+// sorted diffuse path rays the single-ray kernel in key order traced fastest: crytek-sponza bvh8 frames, in one
+// bench run, 0.92x the single-path tracer's ray by ray, 0.97x in packets, 1.21x as streams (1.07x to 1.27x on one
+// thread over chunks of 4k to 64k rays and fallback thresholds of 8 to 64 rays). Single is the default; Packet and
+// Stream are kept, tested, for coherent rays and further work.
 //
 // Flat trees are walked by a ray stream (Barringer and Akenine-Möller 2014, "Dynamic Ray Stream Traversal", sec. 3,
 // with wide nodes): a node is visited once for all the rays that reach it; each of those rays is tested against
@@ -18,11 +19,14 @@
 // Two-level trees answer a batch one ray at a time in either mode (their instance entries transform each ray on its
 // own).
 #include "kernels/traverse.h"
+#include "kernels/traverse_packet.h"
 #include "kernels/traverse_two_level.h"
 
 #include <algorithm>
 #include <array>
 #include <span>
+#include <stdexcept>
+#include <string>
 #include <vector>
 
 namespace canopy {
@@ -165,7 +169,19 @@ void trace_chunk(const WideBvh<N>& bvh, std::span<const Ray> rays, std::span<Hit
 
 }  // namespace detail
 
-enum class BatchTraversal { Single, Stream };
+enum class BatchTraversal { Single, Packet, Stream };
+
+// "single", "packet" or "stream"; throws std::invalid_argument naming the option for another name.
+inline BatchTraversal parse_batch_traversal(const std::string& name) {
+    if (name == "single") return BatchTraversal::Single;
+    if (name == "packet") return BatchTraversal::Packet;
+    if (name == "stream") return BatchTraversal::Stream;
+    throw std::invalid_argument("--batch-traversal '" + name + "': known are single, packet, stream");
+}
+
+inline const char* batch_traversal_name(BatchTraversal how) {
+    return how == BatchTraversal::Single ? "single" : how == BatchTraversal::Packet ? "packet" : "stream";
+}
 
 // Closest hit (Query::Closest) or any hit (Query::Any) of every ray of `rays` into `hits` (same length), each
 // ray's answer the single-ray traverse()'s (see the top of this file for exact ties).
@@ -177,6 +193,7 @@ template <Query Q, bool Robust = true, class TriangleTest = WatertightRay, int N
         for (size_t i = 0; i < rays.size(); ++i) traverse<Q, Robust, TriangleTest>(bvh, rays[i], hits[i], counter);
         return;
     }
+    if (how == BatchTraversal::Packet) return traverse_packets<Q, Robust, TriangleTest>(bvh, rays, hits, counter);
     for (size_t i = 0; i < rays.size(); ++i) {
         hits[i] = Hit{};
         hits[i].t = rays[i].tmax;

@@ -180,7 +180,7 @@ public:
         return with_kernel([&]<int N, bool Robust, class Test>(const auto& bvh) {
             using Layout = std::decay_t<decltype(bvh)>;
             if (scene.settings.tracer == TracerKind::Stream)
-                return render_frame_stream(CanopyBatchTracer<Layout, Robust, Test>{bvh, scene.settings.stream_traversal ? BatchTraversal::Stream : BatchTraversal::Single}, scene, camera, frame, image, on_tile);
+                return render_frame_stream(CanopyBatchTracer<Layout, Robust, Test>{bvh, scene.settings.batch_traversal}, scene, camera, frame, image, on_tile);
             return render_frame(CanopyTracer<Layout, Robust, Test>{bvh}, scene, camera, frame, image, on_tile);
         });
     }

@@ -55,16 +55,24 @@ struct EmbreeTracer {
     }
 };
 
-// The stream tracer's batches through Embree's ray stream interface, rtcIntersect1M, told the rays are incoherent.
+// The stream tracer's batches through Embree's ray stream interface, rtcIntersect1M, told the rays are incoherent,
+// or in packets of 16 consecutive rays through rtcIntersect16 (FrameSettings::embree_packets).
 struct EmbreeBatchTracer {
     struct Scratch {
         std::vector<RTCRayHit> rays;
-        size_t bytes() const { return rays.capacity() * sizeof(RTCRayHit); }
+        RTCRayHit16 packet;
+        size_t bytes() const { return rays.capacity() * sizeof(RTCRayHit) + sizeof(RTCRayHit16); }
     };
     RTCScene scene;
     const uint32_t* prim_offsets = nullptr;
+    bool packets = false;
 
     void closest(std::span<const Ray> rays, std::span<Hit> hits, Scratch& scratch) const {
+        if (packets) {
+            for (size_t first = 0; first < rays.size(); first += 16)
+                closest16(rays.subspan(first, std::min<size_t>(16, rays.size() - first)), hits.subspan(first), scratch.packet);
+            return;
+        }
         scratch.rays.resize(rays.size());
         for (size_t i = 0; i < rays.size(); ++i) to_embree(rays[i], scratch.rays[i]);
         RTCIntersectContext context;
@@ -74,6 +82,32 @@ struct EmbreeBatchTracer {
         for (size_t i = 0; i < rays.size(); ++i) {
             hits[i] = Hit{};
             from_embree(scratch.rays[i], prim_offsets, hits[i]);
+        }
+    }
+
+    void closest16(std::span<const Ray> rays, std::span<Hit> hits, RTCRayHit16& p) const {
+        alignas(64) int valid[16];
+        for (size_t i = 0; i < 16; ++i) {
+            valid[i] = i < rays.size() ? -1 : 0;
+            if (i >= rays.size()) continue;
+            const Ray& r = rays[i];
+            p.ray.org_x[i] = r.org.x, p.ray.org_y[i] = r.org.y, p.ray.org_z[i] = r.org.z;
+            p.ray.dir_x[i] = r.dir.x, p.ray.dir_y[i] = r.dir.y, p.ray.dir_z[i] = r.dir.z;
+            p.ray.tnear[i] = r.tmin, p.ray.tfar[i] = r.tmax, p.ray.time[i] = 0.0f;
+            p.ray.mask[i] = 0xffffffffu, p.ray.id[i] = uint32_t(i), p.ray.flags[i] = 0;
+            p.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
+            p.hit.instID[0][i] = RTC_INVALID_GEOMETRY_ID;
+        }
+        RTCIntersectContext context;
+        rtcInitIntersectContext(&context);
+        context.flags = RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
+        rtcIntersect16(valid, scene, &context, &p);
+        for (size_t i = 0; i < rays.size(); ++i) {
+            hits[i] = Hit{};
+            if (p.hit.geomID[i] == RTC_INVALID_GEOMETRY_ID) continue;
+            const uint32_t inst = p.hit.instID[0][i];
+            const uint32_t offset = prim_offsets && inst != RTC_INVALID_GEOMETRY_ID ? prim_offsets[inst] : 0;
+            hits[i] = {p.ray.tfar[i], p.hit.u[i], p.hit.v[i], offset + p.hit.primID[i]};
         }
     }
 };
@@ -158,7 +192,7 @@ public:
     uint64_t render(const ShadingScene& scene, const PinholeCamera& camera, uint32_t frame, Image& image,
                     const std::function<void(float)>& on_tile) const override {
         if (scene.settings.tracer == TracerKind::Stream)
-            return render_frame_stream(EmbreeBatchTracer{scene_, offsets()}, scene, camera, frame, image, on_tile);
+            return render_frame_stream(EmbreeBatchTracer{scene_, offsets(), scene.settings.embree_packets}, scene, camera, frame, image, on_tile);
         return render_frame(EmbreeTracer{scene_, offsets()}, scene, camera, frame, image, on_tile);
     }
 

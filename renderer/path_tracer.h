@@ -2,6 +2,7 @@
 // The benchmark protocol's diffuse path tracer (../shared/BENCHMARK.md) over TBB tiles, written once
 // for any tracer type with `bool closest(const Ray&, Hit&) const`, so that canopy's kernels and Embree
 // are driven by identical code and identical random numbers.
+#include "kernels/traverse_stream.h"
 #include "renderer/camera.h"
 #include "renderer/image.h"
 #include "renderer/sampling.h"
@@ -23,7 +24,8 @@ struct FrameSettings {
     int width = 1024, height = 768;
     TracerKind tracer = TracerKind::Single;
     uint32_t stream_paths = 1u << 16;  // stream: paths in flight per batch (each batch on one thread)
-    bool stream_traversal = false;     // stream: canopy's batches by ray-stream traversal, not ray by ray
+    BatchTraversal batch_traversal = BatchTraversal::Single;  // stream: how canopy's kernels trace a batch
+    bool embree_packets = false;  // stream: Embree's batches in rtcIntersect16 packets, not through rtcIntersect1M
     int max_bounces = 8;           // at most max_bounces + 1 closest-hit rays per path
     bool material_albedo = false;  // protocol: albedo 0.8 everywhere unless the scene asks for Kd
     float albedo = 0.8f;

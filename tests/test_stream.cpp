@@ -73,18 +73,18 @@ void check_batch(const Layout& bvh, std::span<const Triangle> tris, const std::v
     std::vector<Hit> single(rays.size());
     for (size_t i = 0; i < rays.size(); ++i) traverse<Q, Robust, TriangleTest>(bvh, rays[i], single[i]);
     StreamScratch<Layout::kWidth> scratch;
-    for (BatchTraversal how : {BatchTraversal::Single, BatchTraversal::Stream}) {
+    for (BatchTraversal how : {BatchTraversal::Single, BatchTraversal::Packet, BatchTraversal::Stream}) {
         std::vector<Hit> batch(rays.size());
         traverse_batch<Q, Robust, TriangleTest>(bvh, std::span<const Ray>(rays), std::span<Hit>(batch), scratch, how);
         size_t differ = 0, ties = 0;
         for (size_t i = 0; i < rays.size(); ++i) {
             const bool agree = Q == Query::Any ? batch[i].found() == single[i].found() : same_bits(batch[i], single[i]);
             if (agree) continue;
-            const bool tie = how == BatchTraversal::Stream && Q == Query::Closest && batch[i].found() && single[i].found() &&
+            const bool tie = how != BatchTraversal::Single && Q == Query::Closest && batch[i].found() && single[i].found() &&
                              batch[i].t == single[i].t && ties_at<TriangleTest>(tris, rays[i], batch[i]);
             (tie ? ties : differ) += 1;
             if (!tie && differ <= 3)
-                UNSCOPED_INFO(what << (how == BatchTraversal::Stream ? " stream" : " single") << ": ray " << i << " single prim "
+                UNSCOPED_INFO(what << (how == BatchTraversal::Stream ? " stream" : how == BatchTraversal::Packet ? " packet" : " single") << ": ray " << i << " single prim "
                                    << single[i].prim << " t " << single[i].t << ", batch prim " << batch[i].prim << " t " << batch[i].t);
         }
         INFO(what << ": " << ties << " exact ties");
@@ -134,7 +134,7 @@ TEST_CASE("batch queries agree with brute force", "[stream]") {
     const auto check = [&](const auto& bvh, const char* name) {
         if constexpr (kernel_compiled(std::decay_t<decltype(bvh)>::kWidth)) {
             StreamScratch<std::decay_t<decltype(bvh)>::kWidth> scratch;
-            for (BatchTraversal how : {BatchTraversal::Single, BatchTraversal::Stream}) {
+            for (BatchTraversal how : {BatchTraversal::Single, BatchTraversal::Packet, BatchTraversal::Stream}) {
                 std::vector<Hit> batch(rays.size());
                 traverse_batch<Query::Closest>(bvh, std::span<const Ray>(rays), std::span<Hit>(batch), scratch, how);
                 CHECK(count_mismatches(rays, expected, batch, name) == 0);

@@ -38,6 +38,8 @@ double mean(const std::vector<double>& v) { return std::accumulate(v.begin(), v.
 struct Entry {
     std::shared_ptr<Accelerator> accel;  // shared by the rows of its tracers, built once
     TracerKind tracer = TracerKind::Single;
+    std::string batch;  // canopy's stream rows: the batch traversal, when the bench compares several
+    FrameSettings settings;  // the frame this row renders
     std::shared_ptr<StreamStats> stream = std::make_shared<StreamStats>();  // the stream tracer's sorting and memory
     std::vector<double> build_ms, frame_ms;
     std::vector<double> rebuild_ms;  // dynamic scenes: per timed frame, after the object moved
@@ -51,7 +53,7 @@ struct Entry {
     double total_mean() const { return rebuild_mean() + frame_mean(); }  // Table 3's build + render
     double rays_per_frame() const { return double(rays) / double(frame_ms.size()); }
     std::string label() const {
-        const std::string suffix = tracer == TracerKind::Stream ? " stream" : "";
+        const std::string suffix = tracer == TracerKind::Single ? "" : batch.empty() ? " stream" : " stream/" + batch;
         if (accel->library() == "embree") return "embree " + accel->quality() + suffix;
         const std::string chosen = accel->chosen();
         const std::string planned = accel->frames_planned() ? "@" + std::to_string(accel->frames_planned()) : "";
@@ -72,15 +74,24 @@ TracerKind parse_tracer(const std::string& name) {
 
 const char* tracer_name(TracerKind tracer) { return tracer == TracerKind::Stream ? "stream" : "single"; }
 
-// Every accelerator once per tracer, the first tracer's row building it, the others sharing it.
-std::vector<Entry> rows_per_tracer(std::vector<Entry> accelerators, const std::vector<std::string>& tracers) {
+// Every accelerator once per tracer (canopy's stream rows once per batch traversal), the first row building it, the
+// others sharing it.
+std::vector<Entry> rows_per_tracer(std::vector<Entry> accelerators, const BenchOptions& o) {
     std::vector<Entry> rows;
     for (Entry& a : accelerators)
-        for (const std::string& t : tracers) {
-            Entry row;
-            row.accel = a.accel;
-            row.tracer = parse_tracer(t);
-            rows.push_back(std::move(row));
+        for (const std::string& t : o.tracers) {
+            const TracerKind tracer = parse_tracer(t);
+            const bool canopy = a.accel->library() == "canopy";
+            const std::vector<std::string>& ways = canopy ? o.batch_traversals : o.embree_streams;
+            for (const std::string& batch : tracer == TracerKind::Stream ? ways : std::vector<std::string>{""}) {
+                Entry row;
+                row.accel = a.accel;
+                row.tracer = tracer;
+                row.batch = ways.size() > 1 ? batch : "";
+                if (canopy && !batch.empty()) row.settings.batch_traversal = parse_batch_traversal(batch);
+                row.settings.embree_packets = !canopy && batch == "16";
+                rows.push_back(std::move(row));
+            }
         }
     return rows;
 }
@@ -125,14 +136,18 @@ std::vector<Entry> make_entries(const Scene& scene, const FlatScene& flat, const
         entries.push_back({make_embree_accelerator(flat, quality, o.threads)});
         if (two_level) entries.push_back({make_embree_two_level_accelerator(scene, flat, quality, o.threads)});
     }
-    return rows_per_tracer(std::move(entries), o.tracers);
+    return rows_per_tracer(std::move(entries), o);
 }
 
-// The Embree row that ratios refer to: MEDIUM when present (like for like with binned SAH), with `tracer`.
+// The Embree row that ratios refer to: MEDIUM when present (like for like with binned SAH), with `tracer`; of
+// several Embree stream rows (batch interfaces), the fastest.
 const Entry* reference_of(const std::vector<Entry>& entries, TracerKind tracer = TracerKind::Single) {
     const Entry* ref = nullptr;
-    for (const Entry& e : entries)
-        if (e.accel->library() == "embree" && e.tracer == tracer && (!ref || e.accel->quality() == "medium")) ref = &e;
+    for (const Entry& e : entries) {
+        if (e.accel->library() != "embree" || e.tracer != tracer) continue;
+        const bool medium = e.accel->quality() == "medium", ref_medium = ref && ref->accel->quality() == "medium";
+        if (!ref || (medium && !ref_medium) || (medium == ref_medium && e.frame_mean() < ref->frame_mean())) ref = &e;
+    }
     return ref;
 }
 
@@ -143,7 +158,9 @@ nlohmann::json or_null(const std::optional<T>& v) {
 
 void print_table(const std::vector<Entry>& entries, uint64_t tris) {
     const Entry* ref = reference_of(entries);
-    std::printf("\n%-22s %10s %8s %10s %8s %11s %8s %7s %7s %9s %9s %7s %8s %8s %7s %8s %10s",
+    int width = 22;  // the label column fits the longest label
+    for (const Entry& e : entries) width = std::max(width, int(e.label().size()));
+    std::printf("\n%-*s %10s %8s %10s %8s %11s %8s %7s %7s %9s %9s %7s %8s %8s %7s %8s %10s", width,
                 "accelerator", "build ms", "Mprim/s", "frame ms", "Mrays/s", "rays/frame", "SAH", "EPO", "wSAH", "nodes",
                 "leaves", "split%", "split ms", "%build", "alloc%", "MB", "img mean");
     const bool streams = std::any_of(entries.begin(), entries.end(), [](const Entry& e) { return e.tracer == TracerKind::Stream; });
@@ -153,7 +170,7 @@ void print_table(const std::vector<Entry>& entries, uint64_t tris) {
     for (const Entry& e : entries) {
         const AcceleratorReport& r = e.report;
         const double frame = e.frame_mean();
-        std::printf("%-22s %10.2f %8.2f %10.2f %8.2f %11.0f ", e.label().c_str(), e.build_min(),
+        std::printf("%-*s %10.2f %8.2f %10.2f %8.2f %11.0f ", width, e.label().c_str(), e.build_min(),
                     double(tris) / e.build_min() / 1e3, frame, e.rays_per_frame() / frame / 1e3, e.rays_per_frame());
         if (r.sah) std::printf("%8.2f ", *r.sah);
         else std::printf("%8s ", "-");
@@ -197,6 +214,9 @@ nlohmann::json to_json(const std::vector<Entry>& entries, const BenchOptions& o,
                            {"frames_planned", e.accel->frames_planned() ? nlohmann::json(e.accel->frames_planned()) : nlohmann::json(nullptr)},
                            {"quality", canopy ? nlohmann::json(nullptr) : nlohmann::json(e.accel->quality())},
                            {"tracer", tracer_name(e.tracer)},
+                           {"batch_traversal", e.tracer != TracerKind::Stream ? nlohmann::json(nullptr)
+                                               : canopy ? nlohmann::json(batch_traversal_name(e.settings.batch_traversal))
+                                               : nlohmann::json(e.settings.embree_packets ? "rtcIntersect16" : "rtcIntersect1M")},
                            {"sort_share", e.tracer == TracerKind::Stream ? nlohmann::json(e.sort_share()) : nlohmann::json(nullptr)},
                            {"stream_bytes", e.tracer == TracerKind::Stream ? nlohmann::json(e.stream->bytes.load()) : nlohmann::json(nullptr)},
                            {"build_ms_min", e.build_min()},
@@ -256,14 +276,13 @@ void move_all(std::vector<Entry>& entries, const DynamicObject& object, uint32_t
 // before each timed frame (the warm-up shows it at rest, as built).
 void render_frames(std::vector<Entry>& entries, const Scene& scene, FlatScene& flat, const BenchOptions& o,
                    const DynamicObject* dynamic) {
-    FrameSettings single, stream;
-    single.width = o.width, single.height = o.height, single.max_bounces = o.bounces;
-    single.material_albedo = o.material_albedo;
-    stream = single;
-    stream.tracer = TracerKind::Stream, stream.stream_paths = o.stream_paths, stream.stream_traversal = o.stream_traversal;
     std::vector<ShadingScene> shading;
-    for (const Entry& e : entries)
-        shading.push_back(e.tracer == TracerKind::Stream ? ShadingScene{flat, stream, e.stream.get()} : ShadingScene{flat, single});
+    for (Entry& e : entries) {
+        FrameSettings& s = e.settings;
+        s.width = o.width, s.height = o.height, s.max_bounces = o.bounces, s.material_albedo = o.material_albedo;
+        s.tracer = e.tracer, s.stream_paths = o.stream_paths;
+        shading.push_back({flat, s, e.tracer == TracerKind::Stream ? e.stream.get() : nullptr});
+    }
     const PinholeCamera camera(scene_camera(scene, flat), o.width, o.height);
     std::vector<Image> images(entries.size(), Image(o.width, o.height));
     for (size_t i = 0; i < entries.size(); ++i) entries[i].accel->render(shading[i], camera, 0, images[i]);  // warm-up
@@ -385,8 +404,7 @@ void run_bench(const BenchOptions& o) {
         std::printf("protocol: %dx%d, %d bounces, %d builds (min), %d frames (mean) after 1 warm-up, threads %s%s\n",
                     o.width, o.height, o.bounces, o.builds, o.frames, o.threads ? std::to_string(o.threads).c_str() : "all",
                     std::count(o.tracers.begin(), o.tracers.end(), "stream")
-                        ? ("; stream batches of " + std::to_string(o.stream_paths) + " paths, canopy's traced " +
-                           (o.stream_traversal ? "as ray streams" : "ray by ray")).c_str() : "");
+                        ? ("; stream batches of " + std::to_string(o.stream_paths) + " paths").c_str() : "");
     }
 
     if (dynamic && o.tracers.size() > 1) throw std::invalid_argument("--dynamic takes one --tracer (its rows move their accelerator)");

@@ -21,6 +21,10 @@ namespace {
 
 using namespace canopy;
 
+constexpr const char* kBatchTraversalHelp =
+    "Stream tracer: how canopy traces a sorted batch: single (ray by ray, the fastest on diffuse rays), packet "
+    "(8-ray packets, single rays below 3), stream (ray streams)";
+
 // Freed memory stays in the process for the next build instead of going back to the kernel: glibc otherwise maps
 // large arrays afresh for every build and unmaps them when freed, and on this project's VM the page faults of
 // touching them again cost more than the work (a 2-million-triangle collapse: 0.7 s of faults for 0.1 s of
@@ -69,7 +73,8 @@ int main(int argc, char** argv) {
         ->check(CLI::IsMember({"single", "stream"}))->capture_default_str();
     render->add_option("--stream-paths", r.stream_paths, "Stream tracer: paths in flight per batch")
         ->check(CLI::Range(1, 1 << 24))->capture_default_str();
-    render->add_flag("--stream-traversal", r.stream_traversal, "Stream tracer: trace each batch as ray streams (default: ray by ray)");
+    render->add_option("--batch-traversal", r.batch_traversal, kBatchTraversalHelp)
+        ->check(CLI::IsMember({"single", "packet", "stream"}))->capture_default_str();
     render->add_option("--collapse", r.collapse, "Binary tree to bvh4/bvh8: optimal (Ylitie et al. 2017) or greedy (largest area first)")
         ->check(CLI::IsMember({"optimal", "greedy"}))->capture_default_str();
 
@@ -109,7 +114,11 @@ int main(int argc, char** argv) {
         ->delimiter(',')->check(CLI::IsMember({"single", "stream"}))->capture_default_str();
     bench->add_option("--stream-paths", b.stream_paths, "Stream tracer: paths in flight per batch")
         ->check(CLI::Range(1, 1 << 24))->capture_default_str();
-    bench->add_flag("--stream-traversal", b.stream_traversal, "Stream tracer: canopy traces each batch as ray streams (default: ray by ray)");
+    bench->add_option("--batch-traversal", b.batch_traversals, std::string(kBatchTraversalHelp) + "; a stream row each")
+        ->delimiter(',')->check(CLI::IsMember({"single", "packet", "stream"}))->capture_default_str();
+    bench->add_option("--embree-stream", b.embree_streams,
+                      "Stream tracer: Embree's batch interface, a stream row each: 1m (rtcIntersect1M, incoherent), 16 (rtcIntersect16 packets)")
+        ->delimiter(',')->check(CLI::IsMember({"1m", "16"}))->capture_default_str();
     std::string dynamic;
     CLI::Option* dynamic_option =
         bench->add_option("--dynamic", dynamic,

@@ -83,7 +83,7 @@ void run_render(RenderOptions o) {
     settings.material_albedo = o.material_albedo;
     settings.tracer = o.tracer == "stream" ? TracerKind::Stream : TracerKind::Single;
     settings.stream_paths = o.stream_paths;
-    settings.stream_traversal = o.stream_traversal;
+    settings.batch_traversal = parse_batch_traversal(o.batch_traversal);
     const ShadingScene shading{flat, settings};
     Image image(o.size[0], o.size[1]);
     const bool terminal = isatty(fileno(stderr));
