@@ -4,8 +4,9 @@
 // (BatchTraversal::Packet, traverse_packet.h) or as a ray stream (BatchTraversal::Stream). On the wavefront tracer's
 // sorted diffuse path rays the single-ray kernel in key order traced fastest: crytek-sponza bvh8 frames, in one
 // bench run, 0.92x the single-path tracer's ray by ray, 0.97x in packets, 1.21x as streams (1.07x to 1.27x on one
-// thread over chunks of 4k to 64k rays and fallback thresholds of 8 to 64 rays). Single is the default; Packet and
-// Stream are kept, tested, for coherent rays and further work.
+// thread over chunks of 4k to 64k rays and fallback thresholds of 8 to 64 rays); with batches of 256k paths and
+// kPacketSwitch 6, packets traced crytek-sponza in 0.94x the single-ray kernel's time but conference in 1.05x.
+// Single is the default; Packet and Stream are kept, tested, for coherent rays and further work.
 //
 // Flat trees are walked by a ray stream (Barringer and Akenine-Möller 2014, "Dynamic Ray Stream Traversal", sec. 3,
 // with wide nodes): a node is visited once for all the rays that reach it; each of those rays is tested against

@@ -13,6 +13,7 @@
 
 #include <immintrin.h>
 #include <tbb/enumerable_thread_specific.h>
+#include <tbb/task_arena.h>
 
 #include <atomic>
 #include <chrono>
@@ -85,14 +86,18 @@ uint64_t render_frame_stream(const BatchTracer& tracer, const ShadingScene& scen
     using Wavefront = detail::Wavefront<typename BatchTracer::Scratch>;
     const int w = scene.settings.width;
     const uint64_t pixels = uint64_t(w) * uint64_t(scene.settings.height);
-    const uint64_t batch = std::max<uint32_t>(1, scene.settings.stream_paths);
-    const uint64_t batches = (pixels + batch - 1) / batch;
+    // Equal batches of at most stream_paths paths, as many as a multiple of the threads, so no thread idles while
+    // another traces a last batch alone.
+    const uint64_t threads = uint64_t(tbb::this_task_arena::max_concurrency());
+    uint64_t batches = (pixels + std::max<uint32_t>(1, scene.settings.stream_paths) - 1) / std::max<uint32_t>(1, scene.settings.stream_paths);
+    if (batches > 1) batches = (batches + threads - 1) / threads * threads;
+    const uint64_t batch = (pixels + batches - 1) / batches;
     const RayOrderKey key(scene.flat.bounds);
     static tbb::enumerable_thread_specific<Wavefront> wavefronts;  // reused from frame to frame
     std::atomic<uint64_t> rays{0}, done{0}, sort_ns{0};
     tbb::parallel_for(uint64_t(0), batches, [&](uint64_t b) {
         Wavefront& wf = wavefronts.local();
-        const uint64_t first = b * batch;
+        const uint64_t first = std::min(b * batch, pixels);
         uint32_t live = uint32_t(std::min(batch, pixels - first));
         wf.paths.resize(live);
         wf.rays.resize(live);

@@ -17,7 +17,7 @@ struct RenderOptions {
     bool material_albedo = false, heatmap = false;
     std::string traversal = "robust", intersector = "watertight", collapse = "optimal";
     std::string tracer = "single";       // single (one path at a time) or stream (wavefront, sorted ray batches)
-    uint32_t stream_paths = 1u << 16;    // stream: paths in flight per batch
+    uint32_t stream_paths = 1u << 18;    // stream: paths in flight per batch
     std::string batch_traversal = "single";  // stream: how batches are traced: single, packet, stream
 };
 
