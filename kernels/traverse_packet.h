@@ -1,7 +1,7 @@
 #pragma once
 // Hybrid packet traversal (Benthin, Wald, Woop, Ernst and Áfra 2012, "Combining Single and Packet-Ray Tracing for
-// Arbitrary Ray Distributions on the Intel MIC Architecture", sec. 4): up to 8 rays of one direction octant walk a
-// wide BVH together, a ray in each AVX lane. A node's children are tested one after another against every active
+// Arbitrary Ray Distributions on the Intel MIC Architecture", sec. 4): up to 16 rays (AVX-512; 8 with AVX2) of one
+// direction octant walk a wide BVH together, a ray in each lane. A node's children are tested one after another against every active
 // ray at once, with each ray's own slab data and far limit, so the node's cache lines are fetched once for the
 // packet and the packet's rays hide each other's latency. Where fewer than kPacketSwitch rays remain on a subtree,
 // each goes on alone in the single-ray kernel (sec. 4.2's switch). Each ray tests a node exactly as the single-ray
@@ -19,7 +19,6 @@ namespace canopy {
 // Rays below which a packet's subtree is finished ray by ray. On crytek-sponza's sorted diffuse rays, packet frames
 // took 1.17x, 1.04x and 1.01x the single-ray kernel's in the same order with 2, 4 and 6 (one bench run each).
 constexpr int kPacketSwitch = 6;
-constexpr int kPacketRays = 8;
 
 // Whether this build has the packet kernel (AVX2 lanes); without it, packets trace ray by ray.
 constexpr bool packet_kernel_compiled() {
@@ -32,6 +31,38 @@ constexpr bool packet_kernel_compiled() {
 
 namespace detail {
 
+#if defined(__AVX2__) && defined(__FMA__)
+// A packet's lanes: 16 rays in AVX-512 registers where the CPU has them, else 8 in AVX2 ones. Comparisons of slab
+// distances by their bits as integers, as the single-ray node test makes them (intersect_children).
+struct PacketLanes {
+#if defined(__AVX512F__)
+    static constexpr int kRays = 16;
+    using F = __m512;
+    static F load(const float* p) { return _mm512_load_ps(p); }
+    static F broadcast(const float* p) { return _mm512_set1_ps(*p); }
+    static void store(float* p, F a) { _mm512_store_ps(p, a); }
+    static F fmadd(F a, F b, F c) { return _mm512_fmadd_ps(a, b, c); }
+    // Zero-masked forms with a full mask: the unmasked intrinsics make GCC 12 warn of an undefined operand inside them.
+    static F max_bits(F a, F b) { return _mm512_castsi512_ps(_mm512_maskz_max_epi32(0xffff, _mm512_castps_si512(a), _mm512_castps_si512(b))); }
+    static F min_bits(F a, F b) { return _mm512_castsi512_ps(_mm512_maskz_min_epi32(0xffff, _mm512_castps_si512(a), _mm512_castps_si512(b))); }
+    static uint32_t le_mask_bits(F a, F b) { return _mm512_cmple_epi32_mask(_mm512_castps_si512(a), _mm512_castps_si512(b)); }
+    static uint32_t le_mask(F a, F b) { return _mm512_cmp_ps_mask(a, b, _CMP_LE_OQ); }
+#else
+    static constexpr int kRays = 8;
+    using S = simd::Simd<8>;
+    using F = __m256;
+    static F load(const float* p) { return _mm256_load_ps(p); }
+    static F broadcast(const float* p) { return _mm256_broadcast_ss(p); }
+    static void store(float* p, F a) { _mm256_store_ps(p, a); }
+    static F fmadd(F a, F b, F c) { return S::fmadd(a, b, c); }
+    static F max_bits(F a, F b) { return S::max_bits(a, b); }
+    static F min_bits(F a, F b) { return S::min_bits(a, b); }
+    static uint32_t le_mask_bits(F a, F b) { return S::le_mask_bits(a, b); }
+    static uint32_t le_mask(F a, F b) { return S::le_mask(a, b); }
+#endif
+};
+#endif
+
 // Rays of one packet must share their near and far plane offsets (the octant the node test reads planes by).
 template <int N>
 bool same_octant(const SlabRay<N>& a, const SlabRay<N>& b) {
@@ -40,7 +71,10 @@ bool same_octant(const SlabRay<N>& a, const SlabRay<N>& b) {
 
 #if defined(__AVX2__) && defined(__FMA__)
 
-struct alignas(32) PacketEntry {
+using L = PacketLanes;
+constexpr int kPacketRays = L::kRays;
+
+struct alignas(sizeof(L::F)) PacketEntry {
     float tnear[kPacketRays];  // per lane: the ray's entry distance to this node
     uint32_t child, count;     // as in WideNode: count 0 is an inner node
     uint32_t rays;             // lanes that reached it
@@ -49,15 +83,15 @@ struct alignas(32) PacketEntry {
 // The packet's rays in lanes: slab data, intervals and triangle tests, set up once.
 template <int N, class TriangleTest>
 struct PacketRays {
-    __m256 inv[3], near_add[3], far_add[3], tmin;
-    alignas(32) float tfar[kPacketRays];
-    alignas(32) float tmins[kPacketRays];
+    L::F inv[3], near_add[3], far_add[3], tmin;
+    alignas(sizeof(L::F)) float tfar[kPacketRays];
+    alignas(sizeof(L::F)) float tmins[kPacketRays];
     int near[3], far[3];
     alignas(TriangleTest) unsigned char tests[kPacketRays][sizeof(TriangleTest)];
     static_assert(std::is_trivially_destructible_v<TriangleTest>);
 
     PacketRays(const Ray* rays, const SlabRay<N>* slabs, const Hit* hits, uint32_t count) {
-        alignas(32) float lanes[9][kPacketRays] = {};
+        alignas(sizeof(L::F)) float lanes[9][kPacketRays] = {};
         for (uint32_t r = 0; r < count; ++r) {
             for (int a = 0; a < 3; ++a) {
                 lanes[a][r] = slabs[r].inv_dir[a];
@@ -70,12 +104,12 @@ struct PacketRays {
         }
         for (uint32_t r = count; r < kPacketRays; ++r) tmins[r] = tfar[r] = 0.0f;
         for (int a = 0; a < 3; ++a) {
-            inv[a] = _mm256_load_ps(lanes[a]);
-            near_add[a] = _mm256_load_ps(lanes[3 + a]);
-            far_add[a] = _mm256_load_ps(lanes[6 + a]);
+            inv[a] = L::load(lanes[a]);
+            near_add[a] = L::load(lanes[3 + a]);
+            far_add[a] = L::load(lanes[6 + a]);
             near[a] = slabs[0].near[a], far[a] = slabs[0].far[a];
         }
-        tmin = _mm256_load_ps(tmins);
+        tmin = L::load(tmins);
     }
 
     const TriangleTest& test(int r) const { return *std::launder(reinterpret_cast<const TriangleTest*>(tests[r])); }
@@ -85,17 +119,16 @@ struct PacketRays {
 // distances, computed as intersect_children computes them for one ray.
 template <int N, class TriangleTest>
 [[gnu::always_inline]] inline uint32_t packet_child(const WideNode<N>& node, int c, const PacketRays<N, TriangleTest>& p,
-                                                    __m256 tfar, __m256& tnear) {
-    using S = simd::Simd<8>;
-    __m256 x[3], y[3];
+                                                    L::F tfar, L::F& tnear) {
+    L::F x[3], y[3];
     for (int a = 0; a < 3; ++a) {
-        x[a] = S::fmadd(_mm256_broadcast_ss(node.planes + p.near[a] + c), p.inv[a], p.near_add[a]);
-        y[a] = S::fmadd(_mm256_broadcast_ss(node.planes + p.far[a] + c), p.inv[a], p.far_add[a]);
+        x[a] = L::fmadd(L::broadcast(node.planes + p.near[a] + c), p.inv[a], p.near_add[a]);
+        y[a] = L::fmadd(L::broadcast(node.planes + p.far[a] + c), p.inv[a], p.far_add[a]);
     }
-    const __m256 t0 = S::max_bits(S::max_bits(x[1], p.tmin), S::max_bits(x[2], S::max_bits(x[0], p.tmin)));
-    const __m256 t1 = S::min_bits(S::min_bits(y[1], tfar), S::min_bits(y[2], S::min_bits(y[0], tfar)));
+    const L::F t0 = L::max_bits(L::max_bits(x[1], p.tmin), L::max_bits(x[2], L::max_bits(x[0], p.tmin)));
+    const L::F t1 = L::min_bits(L::min_bits(y[1], tfar), L::min_bits(y[2], L::min_bits(y[0], tfar)));
     tnear = t0;
-    return S::le_mask_bits(t0, t1);
+    return L::le_mask_bits(t0, t1);
 }
 
 // Pushes the children of `node` that some active lane enters, far to near by the entry distance of the lowest such
@@ -103,14 +136,14 @@ template <int N, class TriangleTest>
 template <int N, class TriangleTest>
 [[gnu::always_inline]] inline PacketEntry* push_children(const WideNode<N>& node, uint32_t rays,
                                                          const PacketRays<N, TriangleTest>& p, PacketEntry* sp) {
-    const __m256 tfar = _mm256_load_ps(p.tfar);
+    const L::F tfar = L::load(p.tfar);
     PacketEntry* const base = sp;
     for (int c = 0; c < N; ++c) {
-        __m256 tnear;
+        L::F tnear;
         const uint32_t lanes = packet_child(node, c, p, tfar, tnear) & rays;
         if (!lanes) continue;
         PacketEntry e;
-        _mm256_store_ps(e.tnear, tnear);
+        L::store(e.tnear, tnear);
         e.child = node.child[c], e.count = node.count[c], e.rays = lanes;
         const auto key = [](const PacketEntry& entry) { return entry.tnear[std::countr_zero(entry.rays)]; };
         PacketEntry* j = sp++;
@@ -136,13 +169,13 @@ void trace_packet(const WideBvh<N>& bvh, const Ray* rays, Hit* hits, const SlabR
     PacketEntry stack[kMaxBvhDepth * (N - 1) + 1];
     PacketEntry* sp = stack;
     *sp = PacketEntry{};
-    _mm256_store_ps(sp->tnear, p.tmin);
-    sp->child = 0, sp->count = 0, sp->rays = (1u << count) - 1u;
+    L::store(sp->tnear, p.tmin);
+    sp->child = 0, sp->count = 0, sp->rays = uint32_t((uint64_t(1) << count) - 1u);
     ++sp;
     while (sp != stack) {
         const PacketEntry e = *--sp;
         const uint32_t rays_left =
-            e.rays & ~done & simd::Simd<8>::le_mask(_mm256_load_ps(e.tnear), _mm256_load_ps(p.tfar));
+            e.rays & ~done & L::le_mask(L::load(e.tnear), L::load(p.tfar));
         if (!rays_left) continue;
         if (std::popcount(rays_left) < kPacketSwitch) {
             for (uint32_t m = rays_left; m; m &= m - 1) {
@@ -186,14 +219,14 @@ void traverse_packets(const WideBvh<N>& bvh, std::span<const Ray> rays, std::spa
             return;
         }
         const float bound = plane_bound(bvh.bounds);
-        detail::SlabRay<N> slabs[kPacketRays];
+        detail::SlabRay<N> slabs[detail::kPacketRays];
         size_t first = 0;
         uint32_t count = 0;
         for (size_t i = 0; i <= rays.size(); ++i) {
             const bool end = i == rays.size();
             detail::SlabRay<N> slab;
             if (!end) slab = detail::SlabRay<N>(rays[i], bound, Robust);
-            if (count > 0 && (end || count == kPacketRays || !detail::same_octant(slab, slabs[0]))) {
+            if (count > 0 && (end || count == detail::kPacketRays || !detail::same_octant(slab, slabs[0]))) {
                 detail::trace_packet<Q, TriangleTest>(bvh, rays.data() + first, hits.data() + first, slabs, count, counter);
                 first = i, count = 0;
             }
