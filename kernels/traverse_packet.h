@@ -16,9 +16,11 @@
 
 namespace canopy {
 
-// Rays below which a packet's subtree is finished ray by ray. On crytek-sponza's sorted diffuse rays, packet frames
-// took 1.17x, 1.04x and 1.01x the single-ray kernel's in the same order with 2, 4 and 6 (one bench run each).
-constexpr int kPacketSwitch = 6;
+// Rays below which a packet's subtree is finished ray by ray: a packet pays where most of its lanes are busy. With
+// 16-ray packets, stream frames against the single-path tracer's (one bench run each, 2 threads): crytek-sponza
+// 0.87, 0.85, 0.80, 0.74, 0.80, 0.84 with 3, 6, 8, 10, 12, 14; conference 0.82, 0.81, 0.83 and sibenik 0.79, 0.79,
+// 0.79 with 8, 10, 12 (the single-ray kernel on the same sorted batches: 0.92 to 1.01, 0.91 to 0.92, 0.88).
+constexpr int kPacketSwitch = 10;
 
 // Whether this build has the packet kernel (AVX2 lanes); without it, packets trace ray by ray.
 constexpr bool packet_kernel_compiled() {

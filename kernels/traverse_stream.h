@@ -1,12 +1,12 @@
 #pragma once
 // Batch queries: closest or any hit for a span of rays, each ray's answer exactly the single-ray kernel's. A batch
-// is traced ray by ray by the single-ray kernel (BatchTraversal::Single), or, for flat trees, in packets of 8 rays
-// (BatchTraversal::Packet, traverse_packet.h) or as a ray stream (BatchTraversal::Stream). On the wavefront tracer's
-// sorted diffuse path rays the single-ray kernel in key order traced fastest: crytek-sponza bvh8 frames, in one
-// bench run, 0.92x the single-path tracer's ray by ray, 0.97x in packets, 1.21x as streams (1.07x to 1.27x on one
-// thread over chunks of 4k to 64k rays and fallback thresholds of 8 to 64 rays); with batches of 256k paths and
-// kPacketSwitch 6, packets traced crytek-sponza in 0.94x the single-ray kernel's time but conference in 1.05x.
-// Single is the default; Packet and Stream are kept, tested, for coherent rays and further work.
+// is traced ray by ray by the single-ray kernel (BatchTraversal::Single), or, for flat trees, in packets of 16 rays
+// (BatchTraversal::Packet, traverse_packet.h; 8 without AVX-512) or as a ray stream (BatchTraversal::Stream). On the
+// wavefront tracer's sorted diffuse path rays, 16-ray hybrid packets traced fastest (see kPacketSwitch: 0.74 to 0.82
+// of the single-path tracer's frame time against 0.88 to 1.01 for the single-ray kernel on the same batches). Ray
+// streams traced slowest: crytek-sponza 1.21x the single-path frame (1.07x to 1.27x on one thread over chunks of 4k
+// to 64k rays and fallback thresholds of 8 to 64 rays), as did 8-ray AVX2 packets (0.94x to 1.05x). Packet is the
+// default; Single and Stream are kept, tested, for comparison and further work.
 //
 // Flat trees are walked by a ray stream (Barringer and Akenine-Möller 2014, "Dynamic Ray Stream Traversal", sec. 3,
 // with wide nodes): a node is visited once for all the rays that reach it; each of those rays is tested against

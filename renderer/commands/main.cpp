@@ -22,8 +22,8 @@ namespace {
 using namespace canopy;
 
 constexpr const char* kBatchTraversalHelp =
-    "Stream tracer: how canopy traces a sorted batch: single (ray by ray, the fastest on diffuse rays), packet "
-    "(8-ray packets, single rays below 3), stream (ray streams)";
+    "Stream tracer: how canopy traces a sorted batch: packet (16-ray packets, 8 without AVX-512, single rays below "
+    "10; the fastest on diffuse rays), single (ray by ray), stream (ray streams)";
 
 // Freed memory stays in the process for the next build instead of going back to the kernel: glibc otherwise maps
 // large arrays afresh for every build and unmaps them when freed, and on this project's VM the page faults of

@@ -18,7 +18,7 @@ struct RenderOptions {
     std::string traversal = "robust", intersector = "watertight", collapse = "optimal";
     std::string tracer = "single";       // single (one path at a time) or stream (wavefront, sorted ray batches)
     uint32_t stream_paths = 1u << 18;    // stream: paths in flight per batch
-    std::string batch_traversal = "single";  // stream: how batches are traced: single, packet, stream
+    std::string batch_traversal = "packet";  // stream: how batches are traced: single, packet, stream
 };
 
 // Every registered builder's name, for the options' help.
