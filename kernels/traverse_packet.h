@@ -13,6 +13,7 @@
 
 #include <bit>
 #include <new>
+#include <span>
 
 namespace canopy {
 
@@ -32,6 +33,12 @@ constexpr bool packet_kernel_compiled() {
 }
 
 namespace detail {
+
+// A batch ray by ray through the single-ray kernel of `tree` (flat or two-level).
+template <Query Q, bool Robust, class TriangleTest, class Tree, class Counter>
+void trace_each(const Tree& tree, std::span<const Ray> rays, std::span<Hit> hits, Counter& counter) {
+    for (size_t i = 0; i < rays.size(); ++i) traverse<Q, Robust, TriangleTest>(tree, rays[i], hits[i], counter);
+}
 
 #if defined(__AVX2__) && defined(__FMA__)
 // A packet's lanes: 16 rays in AVX-512 registers where the CPU has them, else 8 in AVX2 ones. Comparisons of slab
@@ -213,13 +220,10 @@ void trace_packet(const WideBvh<N>& bvh, const Ray* rays, Hit* hits, const SlabR
 template <Query Q, bool Robust = true, class TriangleTest = WatertightRay, int N, class Counter = NoCount>
 void traverse_packets(const WideBvh<N>& bvh, std::span<const Ray> rays, std::span<Hit> hits, Counter&& counter = {}) {
     if constexpr (N == 2 || !packet_kernel_compiled()) {
-        for (size_t i = 0; i < rays.size(); ++i) traverse<Q, Robust, TriangleTest>(bvh, rays[i], hits[i], counter);
+        detail::trace_each<Q, Robust, TriangleTest>(bvh, rays, hits, counter);
     } else {
 #if defined(__AVX2__) && defined(__FMA__)
-        if (bvh.nodes.empty()) {
-            for (size_t i = 0; i < rays.size(); ++i) traverse<Q, Robust, TriangleTest>(bvh, rays[i], hits[i], counter);
-            return;
-        }
+        if (bvh.nodes.empty()) return detail::trace_each<Q, Robust, TriangleTest>(bvh, rays, hits, counter);
         const float bound = plane_bound(bvh.bounds);
         detail::SlabRay<N> slabs[detail::kPacketRays];
         size_t first = 0;

@@ -190,10 +190,7 @@ template <Query Q, bool Robust = true, class TriangleTest = WatertightRay, int N
 [[gnu::noinline]] void traverse_batch(const WideBvh<N>& bvh, std::span<const Ray> rays, std::span<Hit> hits,
                                       StreamScratch<N>& scratch, BatchTraversal how = BatchTraversal::Single,
                                       Counter&& counter = {}) {
-    if (how == BatchTraversal::Single) {
-        for (size_t i = 0; i < rays.size(); ++i) traverse<Q, Robust, TriangleTest>(bvh, rays[i], hits[i], counter);
-        return;
-    }
+    if (how == BatchTraversal::Single) return detail::trace_each<Q, Robust, TriangleTest>(bvh, rays, hits, counter);
     if (how == BatchTraversal::Packet) return traverse_packets<Q, Robust, TriangleTest>(bvh, rays, hits, counter);
     for (size_t i = 0; i < rays.size(); ++i) {
         hits[i] = Hit{};
@@ -209,7 +206,7 @@ template <Query Q, bool Robust = true, class TriangleTest = WatertightRay, int N
 template <Query Q, bool Robust = true, class TriangleTest = WatertightRay, int N, class Counter = NoCount>
 void traverse_batch(const TwoLevelBvh<N>& bvh, std::span<const Ray> rays, std::span<Hit> hits, StreamScratch<N>&,
                     BatchTraversal = BatchTraversal::Single, Counter&& counter = {}) {
-    for (size_t i = 0; i < rays.size(); ++i) traverse<Q, Robust, TriangleTest>(bvh, rays[i], hits[i], counter);
+    detail::trace_each<Q, Robust, TriangleTest>(bvh, rays, hits, counter);
 }
 
 }  // namespace canopy

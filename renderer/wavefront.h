@@ -13,6 +13,7 @@
 
 #include <immintrin.h>
 #include <tbb/enumerable_thread_specific.h>
+#include <tbb/global_control.h>
 #include <tbb/task_arena.h>
 
 #include <atomic>
@@ -24,8 +25,14 @@ namespace canopy {
 // What a stream frame cost besides tracing: filled in by render_frame_stream when the caller asks.
 struct StreamStats {
     std::atomic<uint64_t> sort_ns{0};   // summed over threads: computing keys and permuting rays and paths
-    std::atomic<uint64_t> bytes{0};     // the largest per-thread memory (paths, rays, hits, keys, tracer scratch), times threads
+    std::atomic<uint64_t> bytes{0};     // every thread's memory (paths, rays, hits, keys, tracer scratch), summed
 };
+
+// The threads a frame runs on: the arena's, within the limit --threads sets (tbb::global_control).
+inline uint64_t working_threads() {
+    return std::min<size_t>(size_t(tbb::this_task_arena::max_concurrency()),
+                            tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
+}
 
 namespace detail {
 
@@ -88,8 +95,9 @@ uint64_t render_frame_stream(const BatchTracer& tracer, const ShadingScene& scen
     const uint64_t pixels = uint64_t(w) * uint64_t(scene.settings.height);
     // Equal batches of at most stream_paths paths, as many as a multiple of the threads, so no thread idles while
     // another traces a last batch alone.
-    const uint64_t threads = uint64_t(tbb::this_task_arena::max_concurrency());
-    uint64_t batches = (pixels + std::max<uint32_t>(1, scene.settings.stream_paths) - 1) / std::max<uint32_t>(1, scene.settings.stream_paths);
+    const uint64_t threads = working_threads();
+    const uint64_t most = std::max<uint32_t>(1, scene.settings.stream_paths);
+    uint64_t batches = (pixels + most - 1) / most;
     if (batches > 1) batches = (batches + threads - 1) / threads * threads;
     const uint64_t batch = (pixels + batches - 1) / batches;
     const RayOrderKey key(scene.flat.bounds);
@@ -132,14 +140,14 @@ uint64_t render_frame_stream(const BatchTracer& tracer, const ShadingScene& scen
         }
         rays += traced;
         sort_ns += sorting;
-        if (stats) {
-            uint64_t seen = stats->bytes.load();
-            const uint64_t all = wf.bytes() * uint64_t(tbb::this_task_arena::max_concurrency());
-            while (all > seen && !stats->bytes.compare_exchange_weak(seen, all)) {}
-        }
         if (on_batch) on_batch(float(done.fetch_add(1) + 1) / float(batches));
     });
-    if (stats) stats->sort_ns += sort_ns;
+    if (stats) {
+        stats->sort_ns += sort_ns;
+        uint64_t all = 0;  // the threads that have traced batches, each with the memory its largest batch took
+        for (const Wavefront& wf : wavefronts) all += wf.bytes();
+        stats->bytes = std::max(stats->bytes.load(), all);
+    }
     return rays;
 }
 

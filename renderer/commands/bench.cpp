@@ -16,8 +16,6 @@
 #include <optional>
 #include <stdexcept>
 
-#include <tbb/task_arena.h>
-
 namespace canopy {
 namespace {
 
@@ -61,7 +59,7 @@ struct Entry {
     }
     // The stream tracer's share of the timed frames spent sorting rays (all threads' time over threads x frames).
     double sort_share() const {
-        const double threads = double(tbb::this_task_arena::max_concurrency());
+        const double threads = double(working_threads());
         return double(stream->sort_ns.load()) / 1e6 / threads / std::accumulate(frame_ms.begin(), frame_ms.end(), 0.0);
     }
 };
