@@ -61,6 +61,10 @@ public:
     // The same query through the counting variant of the kernel: what the ray visited. Throws
     // std::invalid_argument for an accelerator that cannot count (Embree).
     virtual TraversalCounts count(const Ray& ray) const = 0;
+    // Closest hits (Query::Closest) or any hits (Query::Any) of a batch, each the single-ray query's answer,
+    // through the batch kernel's packets on the calling thread. Throws std::invalid_argument for an accelerator
+    // without one (Embree, whose batches only the stream tracer drives).
+    virtual void trace_batch(Query query, std::span<const Ray> rays, std::span<Hit> hits) const = 0;
 };
 
 struct CanopyOptions {

@@ -202,6 +202,16 @@ public:
         });
     }
 
+    void trace_batch(Query query, std::span<const Ray> rays, std::span<Hit> hits) const override {
+        with_kernel([&]<int N, bool Robust, class Test>(const auto& bvh) {
+            StreamScratch<N> unused;  // packets need none
+            if (query == Query::Any)
+                traverse_batch<Query::Any, Robust, Test>(bvh, rays, hits, unused, BatchTraversal::Packet);
+            else
+                traverse_batch<Query::Closest, Robust, Test>(bvh, rays, hits, unused, BatchTraversal::Packet);
+        });
+    }
+
     AcceleratorReport report(bool with_epo) const override {
         if (two_level_input_) return two_level_report();
         const TreeStats stats = tree_stats(binary_, scene_.triangles.size());
@@ -297,6 +307,9 @@ public:
     }
     Hit trace(const Ray& ray) const override { return built().trace(ray); }
     TraversalCounts count(const Ray& ray) const override { return built().count(ray); }
+    void trace_batch(Query query, std::span<const Ray> rays, std::span<Hit> hits) const override {
+        built().trace_batch(query, rays, hits);
+    }
     AcceleratorReport report(bool with_epo) const override { return built().report(with_epo); }
 
 private:

@@ -206,6 +206,10 @@ public:
         throw std::invalid_argument("Embree does not report what a ray visits: heatmaps need a canopy kernel");
     }
 
+    void trace_batch(Query, std::span<const Ray>, std::span<Hit>) const override {
+        throw std::invalid_argument("Embree's batches are traced by the stream tracer only: batch queries need a canopy kernel");
+    }
+
     AcceleratorReport report(bool) const override {
         AcceleratorReport r;
         r.bytes = uint64_t(std::max<int64_t>(build_bytes_.load(), 0));  // net bytes the build allocated
