@@ -72,7 +72,9 @@ struct HitBatch {
 };
 
 struct AccelStats {
-    std::string builder;   // the builder that built; for "auto", the one it chose (e.g. "sbvh", "rebraid/binned")
+    // The builder that built (for "auto", the one it chose): a two-level top level before it, an optimiser's
+    // start tree after it, e.g. "sbvh", "rebraid/binned", "bittner<lbvh".
+    std::string builder;
     std::string kernel;    // width and modes, e.g. "bvh8" or "bvh4 fast mt"
     std::string reason;    // "auto": the statistics and predicted times that decided; otherwise empty
     uint64_t triangles = 0;  // in the world, every instance's copy counted

@@ -195,7 +195,8 @@ def test_stats(scene):
     assert stats["references_per_triangle"] >= 1 and stats["epo"] is None
     assert canopy.Accel(vertices, triangles, builder="binned").stats(epo=True)["epo"] > 0
     chosen = canopy.Accel(vertices, triangles).stats()
-    assert chosen["builder"].split("/")[-1] in canopy.builders() and chosen["reason"]
+    # "rebraid/binned", "bittner<lbvh": a top level before the builder, an optimiser's start tree after it.
+    assert chosen["builder"].split("/")[-1].split("<")[0] in canopy.builders() and chosen["reason"]
 
 
 def test_load_triangles(tmp_path):

@@ -1,0 +1,202 @@
+// The public C++ API as a consumer links it: include/canopy/canopy.h and libcanopy only. The engine underneath is
+// tested against brute force in the other suites (and, through the Python module, in tests/python); these tests
+// check what the API adds: batches split across threads, instance and triangle numbering, options, errors.
+#include <canopy/canopy.h>
+
+#include <catch2/catch.hpp>
+
+#include <bit>
+#include <cmath>
+#include <random>
+
+namespace {
+
+struct Rays {
+    std::vector<float> origins, directions;
+    size_t count() const { return origins.size() / 3; }
+    canopy::RayBatch batch() const { return {origins, directions, {}, {}}; }
+};
+
+// Origins in [-1.5, 1.5]^3 around the generated scenes (which fill [-1, 1]^3), random directions.
+Rays random_rays(size_t count, uint32_t seed) {
+    std::mt19937 rng(seed);
+    std::uniform_real_distribution<float> uniform(-1.5f, 1.5f);
+    Rays rays;
+    for (size_t i = 0; i < 3 * count; ++i) {
+        rays.origins.push_back(uniform(rng));
+        rays.directions.push_back(uniform(rng));
+    }
+    return rays;
+}
+
+std::vector<canopy::RayHit> batch_hits(const canopy::Accel& accel, const Rays& rays) {
+    const size_t n = rays.count();
+    std::vector<float> t(n), u(n), v(n);
+    std::vector<uint32_t> triangle(n), instance(n);
+    accel.intersect(rays.batch(), {t, triangle, u, v, instance});
+    std::vector<canopy::RayHit> hits(n);
+    for (size_t i = 0; i < n; ++i) hits[i] = {t[i], u[i], v[i], triangle[i], instance[i]};
+    return hits;
+}
+
+std::array<float, 3> ray_point(const std::vector<float>& xyz, size_t i) { return {xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]}; }
+
+bool same_bits(const canopy::RayHit& a, const canopy::RayHit& b) {
+    return std::bit_cast<uint32_t>(a.t) == std::bit_cast<uint32_t>(b.t) && std::bit_cast<uint32_t>(a.u) == std::bit_cast<uint32_t>(b.u) &&
+           std::bit_cast<uint32_t>(a.v) == std::bit_cast<uint32_t>(b.v) && a.triangle == b.triangle && a.instance == b.instance;
+}
+
+canopy::MeshArrays arrays(const canopy::TriangleMesh& mesh) { return {mesh.vertices, mesh.triangles}; }
+
+}  // namespace
+
+TEST_CASE("api: a batch answers each ray as the single-ray query does, bit for bit, on every kernel", "[api]") {
+    const canopy::TriangleMesh mesh = canopy::load_triangles("gen:surface?tris=3000&seed=3");
+    const Rays rays = random_rays(5000, 1);
+    for (const std::string builder : {"binned", "sbvh", "ploc"}) {
+        for (const std::string kernel : {"bvh2", "bvh4", "bvh8"}) {
+            INFO(builder << " " << kernel);
+            const canopy::Accel accel(arrays(mesh), {.builder = builder, .kernel = kernel});
+            const std::vector<canopy::RayHit> hits = batch_hits(accel, rays);
+            std::unique_ptr<bool[]> any(new bool[rays.count()]);
+            accel.occluded(rays.batch(), {any.get(), rays.count()});
+            size_t found = 0;
+            for (size_t i = 0; i < rays.count(); ++i) {
+                const canopy::RayHit single = accel.intersect(ray_point(rays.origins, i), ray_point(rays.directions, i));
+                REQUIRE(same_bits(hits[i], single));
+                REQUIRE(any[i] == single.found());
+                REQUIRE(accel.occluded(ray_point(rays.origins, i), ray_point(rays.directions, i)) == single.found());
+                found += single.found();
+            }
+            REQUIRE(found > rays.count() / 4);
+        }
+    }
+}
+
+TEST_CASE("api: one thread and all threads give the same tree and hits", "[api]") {
+    const canopy::TriangleMesh mesh = canopy::load_triangles("gen:cylinders?tris=4000&seed=2");
+    const Rays rays = random_rays(3000, 2);
+    const std::vector<canopy::RayHit> all = batch_hits(canopy::Accel(arrays(mesh), {.builder = "sbvh"}), rays);
+    const canopy::Accel one(arrays(mesh), {.builder = "sbvh", .threads = 1});
+    const std::vector<canopy::RayHit> single_thread = batch_hits(one, rays);
+    for (size_t i = 0; i < rays.count(); ++i) REQUIRE(same_bits(all[i], single_thread[i]));
+    REQUIRE(one.stats().builder == "sbvh");
+}
+
+TEST_CASE("api: instances report their index and their mesh's triangle, at the world triangles' hits", "[api]") {
+    // Two meshes, a generated surface (no triangles overlap, so no two tie) and one big triangle; three placements.
+    const canopy::TriangleMesh surface = canopy::load_triangles("gen:surface?tris=500&seed=1");
+    const std::vector<float> big_vertices{-2, -2, 0, 2, -2, 0, 0, 2, 0};
+    const std::vector<uint32_t> big_triangles{0, 1, 2};
+    const std::vector<canopy::MeshArrays> meshes{arrays(surface), {big_vertices, big_triangles}};
+    const std::vector<canopy::MeshInstance> instances{
+        {0, {0.5f, 0, 0, -1, 0, 0.5f, 0, 0, 0, 0, 0.5f, 0}},
+        {1, {1, 0, 0, 0, 0, 0, -1, -1.2f, 0, 1, 0, 0}},  // the triangle laid flat below, rotated about x
+        {0, {0, -0.4f, 0, 1, 0.4f, 0, 0, 0, 0, 0, 0.4f, 0.5f}}};
+    // The same world by hand: each instance's triangles transformed, in instance order.
+    std::vector<float> world;
+    std::vector<uint32_t> first{0};
+    for (const canopy::MeshInstance& instance : instances) {
+        const canopy::MeshArrays& mesh = meshes[instance.mesh];
+        for (uint32_t index : mesh.triangles)
+            for (int row = 0; row < 3; ++row) {
+                const float* m = &instance.transform[4 * row];
+                const float* p = &mesh.vertices[3 * index];
+                world.push_back(m[0] * p[0] + m[1] * p[1] + m[2] * p[2] + m[3]);
+            }
+        first.push_back(first.back() + uint32_t(mesh.triangles.size() / 3));
+    }
+    std::vector<uint32_t> world_triangles(world.size() / 3);
+    for (uint32_t i = 0; i < world_triangles.size(); ++i) world_triangles[i] = i;
+    const Rays rays = random_rays(4000, 3);
+    const std::vector<canopy::RayHit> flat = batch_hits(canopy::Accel({world, world_triangles}, {.builder = "binned"}), rays);
+    for (const std::string toplevel : {"flat", "two-level", "rebraid"}) {
+        INFO(toplevel);
+        const canopy::Accel accel(meshes, instances, {.builder = "binned", .toplevel = toplevel});
+        const std::vector<canopy::RayHit> hits = batch_hits(accel, rays);
+        std::array<size_t, 3> per_instance{};
+        for (size_t i = 0; i < rays.count(); ++i) {
+            REQUIRE(hits[i].found() == flat[i].found());
+            if (!flat[i].found()) continue;
+            // Two-level trees intersect in object space: other roundings, which matter near the origins.
+            REQUIRE(hits[i].t == Approx(flat[i].t).epsilon(1e-5).margin(1e-5));
+            REQUIRE(first[hits[i].instance] + hits[i].triangle == flat[i].triangle);
+            ++per_instance.at(hits[i].instance);
+        }
+        for (size_t hit_count : per_instance) REQUIRE(hit_count > 20);
+    }
+}
+
+TEST_CASE("api: stats name the builder auto chose; EPO only when asked", "[api]") {
+    const canopy::TriangleMesh mesh = canopy::load_triangles("gen:box?tris=2000");
+    const canopy::AccelStats chosen = canopy::Accel(arrays(mesh)).stats();
+    // "rebraid/binned", "bittner<lbvh": a top level before the builder, an optimiser's start tree after it.
+    const size_t slash = chosen.builder.find('/');
+    const std::string builder = chosen.builder.substr(slash == std::string::npos ? 0 : slash + 1);
+    bool registered = false;
+    for (const canopy::BuilderDescription& b : canopy::registered_builders()) registered |= b.name == builder.substr(0, builder.find('<'));
+    REQUIRE(registered);
+    REQUIRE(!chosen.reason.empty());
+    REQUIRE(chosen.triangles == 2000);
+    const canopy::Accel binned(arrays(mesh), {.builder = "binned", .kernel = "bvh4"});
+    REQUIRE(binned.stats().kernel == "bvh4");
+    REQUIRE(!binned.stats().epo);
+    const canopy::AccelStats full = binned.stats(true);
+    REQUIRE(*full.epo > 0);
+    REQUIRE(*full.sah > 0);
+    REQUIRE(*full.nodes > 0);
+    REQUIRE(full.bytes > 0);
+}
+
+TEST_CASE("api: an empty batch does nothing; hit views may be left out", "[api]") {
+    const canopy::TriangleMesh mesh = canopy::load_triangles("gen:box?tris=100");
+    const canopy::Accel accel(arrays(mesh), {.builder = "lbvh"});
+    accel.intersect(canopy::RayBatch{}, canopy::HitBatch{});
+    const std::vector<float> origin{0, 0, 5}, down{0, 0, -1};
+    std::vector<float> t(1);
+    accel.intersect({origin, down, {}, {}}, {.t = t});
+    REQUIRE(t[0] == accel.intersect({0, 0, 5}, {0, 0, -1}).t);
+    REQUIRE(std::isfinite(t[0]));
+}
+
+TEST_CASE("api: bad input throws std::invalid_argument naming the argument", "[api]") {
+    const std::vector<float> vertices{0, 0, 0, 1, 0, 0, 0, 1, 0};
+    const std::vector<uint32_t> triangles{0, 1, 2};
+    const auto build = [&](std::vector<float> v, std::vector<uint32_t> t, canopy::AccelOptions o = {}) {
+        return canopy::Accel({v, t}, o);
+    };
+    using Catch::Contains;
+    REQUIRE_THROWS_WITH(build({}, triangles), Contains("vertices: empty"));
+    REQUIRE_THROWS_WITH(build({0, 0, 0, 1}, triangles), Contains("vertices: 4 values, not a multiple of 3"));
+    REQUIRE_THROWS_WITH(build({0, 0, 0, 1, NAN, 0, 0, 1, 0}, triangles), Contains("vertices[1]: y is nan"));
+    REQUIRE_THROWS_WITH(build(vertices, {}), Contains("triangles: empty"));
+    REQUIRE_THROWS_WITH(build(vertices, {0, 1}), Contains("triangles: 2 indices"));
+    REQUIRE_THROWS_WITH(build(vertices, {0, 1, 2, 2, 1, 3}), Contains("triangles[1]: vertex index 3 is out of range (3 vertices)"));
+    REQUIRE_THROWS_WITH(build(vertices, triangles, {.builder = "nosuch"}), Contains("builder: unknown builder 'nosuch'"));
+    REQUIRE_THROWS_WITH(build(vertices, triangles, {.kernel = "bvh16"}), Contains("kernel: unknown kernel 'bvh16'"));
+    REQUIRE_THROWS_WITH(build(vertices, triangles, {.builder = "binned", .toplevel = "x"}), Contains("toplevel: unknown 'x'"));
+    REQUIRE_THROWS_WITH(build(vertices, triangles, {.threads = -2}), Contains("threads: -2"));
+
+    const std::vector<canopy::MeshArrays> meshes{{vertices, triangles}};
+    REQUIRE_THROWS_WITH(canopy::Accel(meshes, std::vector<canopy::MeshInstance>{{1}}), Contains("instances[0].mesh: 1 is out of range (1 meshes)"));
+    REQUIRE_THROWS_WITH(canopy::Accel(meshes, std::vector<canopy::MeshInstance>{{0}, {0, {}}}), Contains("instances[1].transform: singular"));
+    REQUIRE_THROWS_WITH(canopy::Accel(std::span<const canopy::MeshArrays>{}, {}), Contains("meshes: empty"));
+    const std::vector<canopy::MeshArrays> second_bad{{vertices, triangles}, {vertices, {}}};
+    REQUIRE_THROWS_WITH(canopy::Accel(second_bad, {}), Contains("meshes[1].triangles: empty"));
+
+    const canopy::Accel accel({vertices, triangles}, {.builder = "binned"});
+    const std::vector<float> two{0, 0, 1, 0.2f, 0.2f, 1}, down{0, 0, -1, 0, 0, -1}, nan_origin{0, 0, 1, NAN, 0, 1};
+    std::vector<float> t(2);
+    std::unique_ptr<bool[]> occluded(new bool[2]);
+    REQUIRE_THROWS_WITH(accel.intersect({two, std::span(down).first(3), {}, {}}, {.t = t}), Contains("directions: 1 rays, origins 2"));
+    REQUIRE_THROWS_WITH(accel.intersect({std::span(two).first(4), down, {}, {}}, {}), Contains("origins: 4 values"));
+    REQUIRE_THROWS_WITH(accel.intersect({nan_origin, down, {}, {}}, {.t = t}), Contains("origins[1]: x is nan"));
+    const std::vector<float> three{1, 1, 1}, nan_end{NAN};
+    REQUIRE_THROWS_WITH(accel.intersect({two, down, three, {}}, {.t = t}), Contains("tmin: 3 values for 2 rays"));
+    REQUIRE_THROWS_WITH(accel.occluded({two, down, {}, nan_end}, {occluded.get(), 2}), Contains("tmax: nan"));
+    REQUIRE_THROWS_WITH(accel.occluded({two, down, {}, {}}, {occluded.get(), 1}), Contains("occluded: 1 values for 2 rays"));
+    REQUIRE_THROWS_WITH(accel.intersect({two, down, {}, {}}, {.u = std::span(t).first(1)}), Contains("hits.u: 1 values for 2 rays"));
+    REQUIRE_THROWS_WITH(accel.intersect({0, 0, 1}, {0, INFINITY, -1}), Contains("directions[0]: y is inf"));
+    REQUIRE_THROWS_WITH(accel.occluded({0, 0, 1}, {0, 0, -1}, NAN), Contains("tmin: nan"));
+    REQUIRE_THROWS_WITH(canopy::load_triangles("no-such-file.obj"), Contains("no-such-file.obj"));
+}
