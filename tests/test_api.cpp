@@ -127,7 +127,7 @@ TEST_CASE("api: instances report their index and their mesh's triangle, at the w
     }
 }
 
-TEST_CASE("api: stats name the builder auto chose; EPO only when asked", "[api]") {
+TEST_CASE("api: stats name the builder auto chose, and EPO only when asked", "[api]") {
     const canopy::TriangleMesh mesh = canopy::load_triangles("gen:box?tris=2000");
     const canopy::AccelStats chosen = canopy::Accel(arrays(mesh)).stats();
     // "rebraid/binned", "bittner<lbvh": a top level before the builder, an optimiser's start tree after it.
@@ -148,7 +148,7 @@ TEST_CASE("api: stats name the builder auto chose; EPO only when asked", "[api]"
     REQUIRE(full.bytes > 0);
 }
 
-TEST_CASE("api: an empty batch does nothing; hit views may be left out", "[api]") {
+TEST_CASE("api: an empty batch does nothing, and hit views may be left out", "[api]") {
     const canopy::TriangleMesh mesh = canopy::load_triangles("gen:box?tris=100");
     const canopy::Accel accel(arrays(mesh), {.builder = "lbvh"});
     accel.intersect(canopy::RayBatch{}, canopy::HitBatch{});
