@@ -94,10 +94,25 @@ Mesh baked_mesh(const Scene& scene) {
 }
 
 Scene load_scene(const std::string& name) {
+    return load_scene(name, [](const SceneSize&) {});
+}
+
+Scene load_scene(const std::string& name, const SceneSizeCheck& fits) {
+    if (name.starts_with("gen:")) fits(generated_scene_size(name));
     Scene scene = load_by_kind(name);
+    if (!name.starts_with("gen:")) fits(scene_size(scene));
     if (instanced_triangle_count(scene) == 0)
         throw InputError("'" + (name.empty() ? std::string("default scene") : name) + "': the scene has no triangles");
     return scene;
+}
+
+SceneSize scene_size(const Scene& scene) {
+    SceneSize size{0, 0, instanced_triangle_count(scene), scene.instances.size()};
+    for (const Mesh& mesh : scene.meshes) {
+        size.vertices += mesh.positions.size();
+        size.triangles += mesh.triangles.size();
+    }
+    return size;
 }
 
 uint64_t instanced_triangle_count(const Scene& scene) {
