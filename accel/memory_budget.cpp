@@ -1,5 +1,8 @@
 #include "accel/memory_budget.h"
 
+#include "accel/builders/early_split_clipping.h"
+#include "accel/builders/presplit.h"
+#include "accel/builders/sbvh.h"
 #include "accel/bvh.h"
 #include "accel/wide_bvh.h"
 
@@ -45,12 +48,12 @@ struct ReferenceCap {
     const char* builder;
     double per_triangle;
 };
-constexpr ReferenceCap kReferenceCaps[] = {
-    {"sbvh", 2.0},          // SbvhSettings::max_references_per_triangle
-    {"presplit", 1.5},      // PresplitSettings::budget: 50% extra references
-    {"streelet", 1.3},      // a 30% pre-split quota
-    {"esc", 4.0},           // kMaxEscReferencesPerTriangle: SA_max grows until the pieces fit
-    {"bonsai-split", 2.0},  // split partitioning: 20% padding per region, moved regions padded again
+const ReferenceCap kReferenceCaps[] = {
+    {"sbvh", SbvhSettings{}.max_references_per_triangle},
+    {"presplit", 1.0 + PresplitSettings{}.budget},
+    {"esc", kMaxEscReferencesPerTriangle},
+    {"streelet", 1.3},      // streelet.cpp: a 30% pre-split quota
+    {"bonsai-split", 2.0},  // split_partitioning.cpp: 20% padding per region, a moved region padded again
     {"sweep-presplit", 2.0},
 };
 
