@@ -26,41 +26,57 @@ inline float difference_of_products(float a, float b, float c, float d) {
 
 class WatertightRay {
 public:
+    // The ray's frame (sec. 3): the axes that become x, y and z, and the shear that makes the ray the +z axis.
     // Without branches: the axes come from a comparison mask through tables, and coordinates are read by index
     // from memory (glm's operator[] is a switch), since the choice follows the ray's direction, which no branch
     // predictor can guess. The tables are static (a local constexpr array was copied to the stack on every call)
     // and |dir| is three ANDs (glm::abs compiled to compare-and-blend): crytek-sponza bvh8 frames 1.13x Embree
     // MEDIUM's before, 1.11x after (two runs each; 1 to 3% on sibenik, conference and stanford-bunny).
-    [[gnu::always_inline]] explicit WatertightRay(const Ray& ray) : org_(ray.org) {
-        const Vec3 a(std::abs(ray.dir.x), std::abs(ray.dir.y), std::abs(ray.dir.z));
-        // sec. 3: the largest |dir| axis, as a >= chain would choose it: bits x>=y, x>=z, y>=z to the axis
-        static constexpr int kLargest[8] = {2, 2, 2, 0, 1, 2, 1, 0};
-        kz_ = kLargest[int(a.x >= a.y) | int(a.x >= a.z) << 1 | int(a.y >= a.z) << 2];
-        static constexpr int kNext[3] = {1, 2, 0};
-        kx_ = kNext[kz_];
-        ky_ = kNext[kx_];
-        const float* dir = &ray.dir.x;
-        const int swap = (kx_ ^ ky_) & -int(dir[kz_] < 0.0f);  // a negative z swaps x and y: keeps the winding
-        kx_ ^= swap, ky_ ^= swap;
-        sz_ = 1.0f / dir[kz_];
-        sx_ = dir[kx_] * sz_;
-        sy_ = dir[ky_] * sz_;
+    struct Shear {
+        int kx, ky, kz;
+        float sx, sy, sz;
+
+        [[gnu::always_inline]] static Shear of(const Ray& ray) {
+            const Vec3 a(std::abs(ray.dir.x), std::abs(ray.dir.y), std::abs(ray.dir.z));
+            // The largest |dir| axis, as a >= chain would choose it: bits x>=y, x>=z, y>=z to the axis
+            static constexpr int kLargest[8] = {2, 2, 2, 0, 1, 2, 1, 0};
+            Shear s;
+            s.kz = kLargest[int(a.x >= a.y) | int(a.x >= a.z) << 1 | int(a.y >= a.z) << 2];
+            static constexpr int kNext[3] = {1, 2, 0};
+            s.kx = kNext[s.kz];
+            s.ky = kNext[s.kx];
+            const float* dir = &ray.dir.x;
+            const int swap = (s.kx ^ s.ky) & -int(dir[s.kz] < 0.0f);  // a negative z swaps x and y: keeps the winding
+            s.kx ^= swap, s.ky ^= swap;
+            s.sz = 1.0f / dir[s.kz];
+            s.sx = dir[s.kx] * s.sz;
+            s.sy = dir[s.ky] * s.sz;
+            return s;
+        }
+    };
+
+    [[gnu::always_inline]] explicit WatertightRay(const Ray& ray) : org_(ray.org), shear_(Shear::of(ray)) {
         const float* org = &org_.x;
+        const auto [kx, ky, kz, sx, sy, sz] = shear_;
         using simd::broadcast;
-        lanes_ = {{broadcast(org[kx_]), broadcast(org[ky_]), broadcast(org[kz_])}, broadcast(sx_), broadcast(sy_), broadcast(sz_)};
+        lanes_ = {{broadcast(org[kx]), broadcast(org[ky]), broadcast(org[kz])}, broadcast(sx), broadcast(sy), broadcast(sz)};
     }
+
+    const Shear& shear() const { return shear_; }
+    const Vec3& origin() const { return org_; }
 
     // Intersects in (tmin, hit.t]; on a hit updates `hit` and returns true.
     bool intersect(const Vec3& p0, const Vec3& p1, const Vec3& p2, uint32_t prim, float tmin, Hit& hit) const {
         const Vec3 a_vec = p0 - org_, b_vec = p1 - org_, c_vec = p2 - org_;
         const float *a = &a_vec.x, *b = &b_vec.x, *c = &c_vec.x;
+        const auto [kx, ky, kz, sx, sy, sz] = shear_;
         // Sheared 2D coordinates (sec. 3, eq. 5), each one FMA: a shorter path to the edge functions than a product
         // and a difference, and one rounding, not two. A shared vertex still shears to the same point in every
         // triangle, which is all watertightness asks. crytek-sponza bvh8 frames 1.069x Embree MEDIUM's before,
         // 1.045x after; sibenik 1.064x, 1.036x (means of 4 and 3 alternating runs).
-        const float ax = std::fma(-sx_, a[kz_], a[kx_]), ay = std::fma(-sy_, a[kz_], a[ky_]);
-        const float bx = std::fma(-sx_, b[kz_], b[kx_]), by = std::fma(-sy_, b[kz_], b[ky_]);
-        const float cx = std::fma(-sx_, c[kz_], c[kx_]), cy = std::fma(-sy_, c[kz_], c[ky_]);
+        const float ax = std::fma(-sx, a[kz], a[kx]), ay = std::fma(-sy, a[kz], a[ky]);
+        const float bx = std::fma(-sx, b[kz], b[kx]), by = std::fma(-sy, b[kz], b[ky]);
+        const float cx = std::fma(-sx, c[kz], c[kx]), cy = std::fma(-sy, c[kz], c[ky]);
         // Edge functions (eq. 6). Exactly signed, so the paper's double-precision retry on zero is not needed.
         const float u = difference_of_products(cx, by, cy, bx);
         const float v = difference_of_products(ax, cy, ay, cx);
@@ -70,7 +86,7 @@ public:
         if (det == 0.0f) return false;
         // t = sz (u a_z + v b_z + w c_z) / det (sec. 3, eq. 7, with the shear's z scale applied once, after the
         // interpolation); an overflow to inf (denormal directions, or det underflowing) is no hit.
-        const float t = std::fma(u, a[kz_], std::fma(v, b[kz_], w * c[kz_])) * (sz_ / det);
+        const float t = std::fma(u, a[kz], std::fma(v, b[kz], w * c[kz])) * (sz / det);
         if (!(t > tmin && t <= hit.t && t < std::numeric_limits<float>::infinity())) return false;
         hit = {t, v / det, w / det, prim};
         return true;
@@ -87,9 +103,9 @@ public:
         const F sx = S::low(lanes_.sx), sy = S::low(lanes_.sy), sz = S::low(lanes_.sz);
         F x[3], y[3], z[3];  // the vertices relative to the origin: x and y sheared, z unscaled (sz goes to t)
         for (int v = 0; v < 3; ++v) {
-            const F px = S::sub(S::load(block.v[v][kx_]), org[0]);
-            const F py = S::sub(S::load(block.v[v][ky_]), org[1]);
-            const F pz = S::sub(S::load(block.v[v][kz_]), org[2]);
+            const F px = S::sub(S::load(block.v[v][shear_.kx]), org[0]);
+            const F py = S::sub(S::load(block.v[v][shear_.ky]), org[1]);
+            const F pz = S::sub(S::load(block.v[v][shear_.kz]), org[2]);
             x[v] = S::fnmadd(sx, pz, px);
             y[v] = S::fnmadd(sy, pz, py);
             z[v] = pz;
@@ -126,8 +142,7 @@ private:
         simd::Broadcast org[3], sx, sy, sz;
     } lanes_;  // broadcast once per ray, not per block: a block test is the hot path of every leaf visit
     Vec3 org_;
-    int kx_, ky_, kz_;
-    float sx_, sy_, sz_;
+    Shear shear_;
 };
 
 }  // namespace canopy

@@ -47,6 +47,41 @@ std::vector<Ray> adversarial_rays(std::span<const Triangle> tris, size_t random_
     return rays;
 }
 
+// Rays as the wavefront tracer hands them to a batch query: in RayOrderKey order, so rays of one octant and nearby
+// origins form full packets, whose leaves test a triangle against every lane at once.
+std::vector<Ray> in_key_order(std::span<const Triangle> tris, std::vector<Ray> rays) {
+    BBox bounds;
+    for (const Triangle& t : tris) bounds.extend(BBox::of(t));
+    const RayOrderKey key(bounds);
+    std::stable_sort(rays.begin(), rays.end(), [&](const Ray& a, const Ray& b) { return key(a) < key(b); });
+    return rays;
+}
+
+// Bundles of nearly parallel rays of one octant from points around the scene, so every packet's rays share their
+// watertight axes (the packet leaf test's uniform case), each bundle's direction dominated by another axis and sign.
+std::vector<Ray> parallel_bundles(std::span<const Triangle> tris, uint64_t seed) {
+    BBox bounds;
+    for (const Triangle& t : tris) bounds.extend(BBox::of(t));
+    std::mt19937 rng{uint32_t(seed)};
+    std::uniform_real_distribution<float> spread(0.01f, 0.05f), unit(0.0f, 1.0f);
+    std::vector<Ray> rays;
+    for (int axis = 0; axis < 3; ++axis)
+        for (float sign : {1.0f, -1.0f})
+            for (int bundle = 0; bundle < 8; ++bundle) {
+                Vec3 dir(0.0f), side;
+                dir[axis] = sign;
+                for (int a = 0; a < 3; ++a) side[a] = unit(rng) < 0.5f ? -1.0f : 1.0f;
+                const Vec3 from = bounds.lower + Vec3(unit(rng), unit(rng), unit(rng)) * bounds.extent() - 0.6f * dir * bounds.extent();
+                for (int r = 0; r < 64; ++r) {
+                    Vec3 d = dir;
+                    for (int a = 0; a < 3; ++a)
+                        if (a != axis) d[a] = side[a] * spread(rng);
+                    rays.push_back({from + 0.01f * Vec3(unit(rng), unit(rng), unit(rng)) * bounds.extent(), d});
+                }
+            }
+    return rays;
+}
+
 bool same_bits(const Hit& a, const Hit& b) {
     return a.prim == b.prim && std::bit_cast<uint32_t>(a.t) == std::bit_cast<uint32_t>(b.t) &&
            std::bit_cast<uint32_t>(a.u) == std::bit_cast<uint32_t>(b.u) && std::bit_cast<uint32_t>(a.v) == std::bit_cast<uint32_t>(b.v);
@@ -114,7 +149,11 @@ void check_every_width(const BuiltScene& built, std::span<const Triangle> tris, 
 TEST_CASE("batch queries answer every ray as the single-ray kernel does, in every width and mode", "[stream]") {
     for (const char* spec : {"gen:box?tris=3000&seed=7", "gen:cylinders?tris=2000&seed=3"}) {
         const FlatScene flat = flatten(load_scene(spec));
-        const std::vector<Ray> rays = adversarial_rays(flat.triangles, 6000, 11);
+        std::vector<Ray> rays = adversarial_rays(flat.triangles, 6000, 11);
+        const std::vector<Ray> sorted = in_key_order(flat.triangles, rays);
+        rays.insert(rays.end(), sorted.begin(), sorted.end());
+        const std::vector<Ray> bundles = parallel_bundles(flat.triangles, 4);
+        rays.insert(rays.end(), bundles.begin(), bundles.end());
         for (const char* builder : {"binned", "lbvh", "sbvh"}) {
             const BuiltScene built = build_with(builder, flat.triangles);
             const std::string what = std::string(spec) + " / " + builder;
