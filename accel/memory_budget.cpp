@@ -3,6 +3,7 @@
 #include "accel/builders/early_split_clipping.h"
 #include "accel/builders/presplit.h"
 #include "accel/builders/sbvh.h"
+#include "accel/builders/split_partitioning.h"
 #include "accel/bvh.h"
 #include "accel/wide_bvh.h"
 
@@ -53,8 +54,8 @@ const ReferenceCap kReferenceCaps[] = {
     {"presplit", 1.0 + PresplitSettings{}.budget},
     {"esc", kMaxEscReferencesPerTriangle},
     {"streelet", 1.3},      // streelet.cpp: a 30% pre-split quota
-    {"bonsai-split", 2.0},  // split_partitioning.cpp: 20% padding per region, a moved region padded again
-    {"sweep-presplit", 2.0},
+    {"bonsai-split", kMaxReferenceCapacity},
+    {"sweep-presplit", kMaxReferenceCapacity},
 };
 
 // The builders `--builder auto` chooses from (renderer/auto_builder.cpp): its estimate is the largest of theirs.

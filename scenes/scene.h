@@ -70,6 +70,8 @@ struct FlatScene {
     BBox bounds;
 };
 
+// Throws InputError for a scene whose coordinates are beyond 1e12 or which is less than 1e-12 across: canopy's
+// single-precision intersection test hits nothing there.
 FlatScene flatten(const Scene& scene);
 
 // BENCHMARK.md: target = bounds centre, eye = centre + normalize(0, 0.35, 1) * 1.1 * |diagonal|.
