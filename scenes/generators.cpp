@@ -67,13 +67,27 @@ Scene generate_cylinders(const GeneratorSpec& spec);
 Scene generate_surface(const GeneratorSpec& spec);
 Scene generate_triangles(const GeneratorSpec& spec);
 
-using Generator = Scene (*)(const GeneratorSpec&);
+struct Generator {
+    std::string_view name;
+    Scene (*generate)(const GeneratorSpec&);
+    // Vertices per triangle at most: gen:triangles shares none; the others' grids and fans share most (a cube
+    // face of n x n quads has (n + 1)^2 vertices for 2 n^2 triangles, n >= 3).
+    uint64_t vertices_per_triangle;
+};
 
-Generator find_generator(std::string_view name) {
-    if (name == "box") return generate_box;
-    if (name == "cylinders") return generate_cylinders;
-    if (name == "surface") return generate_surface;
-    if (name == "triangles") return generate_triangles;
+constexpr Generator kGenerators[] = {
+    {"box", generate_box, 1},
+    {"cylinders", generate_cylinders, 1},
+    {"surface", generate_surface, 1},
+    {"triangles", generate_triangles, 3},
+};
+// Above every generator's count: box's minimum, cylinders' and surface's rounding up to even.
+constexpr uint64_t kMinimumTriangles = 118;
+constexpr uint64_t kSmallMeshVertices = 1000;  // the room's walls, a cube's edges beyond the bound
+
+const Generator* find_generator(std::string_view name) {
+    for (const Generator& generator : kGenerators)
+        if (generator.name == name) return &generator;
     return nullptr;
 }
 
@@ -397,7 +411,14 @@ Scene generate_triangles(const GeneratorSpec& spec) {
 
 Scene generate_scene(const std::string& spec) {
     const GeneratorSpec parsed = parse_spec(spec);
-    return find_generator(parsed.generator)(parsed);
+    return find_generator(parsed.generator)->generate(parsed);
+}
+
+SceneSize generated_scene_size(const std::string& spec) {
+    const GeneratorSpec parsed = parse_spec(spec);
+    const uint64_t triangles = std::max(parsed.triangles + 1, kMinimumTriangles);
+    const uint64_t vertices = triangles * find_generator(parsed.generator)->vertices_per_triangle + kSmallMeshVertices;
+    return {vertices, triangles, triangles, 1};
 }
 
 Scene default_scene() {

@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <cctype>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 
 namespace canopy {
@@ -63,6 +64,33 @@ void append_materials(const Mesh& mesh, FlatScene& flat) {
     flat.material.insert(flat.material.end(), mesh.triangles.size(), uint32_t(fallback - flat.materials.begin()));
 }
 
+// The watertight test multiplies up to three vertex coordinates relative to the ray origin: past about 7e12 the
+// product overflows float, and for a scene much smaller than 1e-12 it underflows; either way no ray hits anything
+// (the Cornell box renders empty at scales 1e14 and 1e-16, and renders at 1e12 and 1e-14). Such a scene is
+// refused rather than rendered empty.
+constexpr float kMaxCoordinate = 1e12f, kMinDiagonal = 1e-12f;
+
+std::string scientific(float x) {
+    char text[32];
+    std::snprintf(text, sizeof text, "%.2g", double(x));
+    return text;
+}
+
+void check_representable(const std::string& name, const BBox& bounds) {
+    if (bounds.empty()) return;
+    const Vec3 reach = glm::max(glm::abs(bounds.lower), glm::abs(bounds.upper));
+    const float largest = std::max({reach.x, reach.y, reach.z});
+    if (largest > kMaxCoordinate)
+        throw InputError("'" + name + "': the scene's coordinates reach " + scientific(largest) + ", beyond " +
+                         scientific(kMaxCoordinate) + ", where canopy's single-precision intersection test overflows "
+                         "and hits nothing; scale or move the scene towards the origin");
+    const float diagonal = glm::length(bounds.extent());
+    if (diagonal < kMinDiagonal)
+        throw InputError("'" + name + "': the scene is " + scientific(diagonal) + " across, below " +
+                         scientific(kMinDiagonal) + ", where canopy's single-precision intersection test underflows "
+                         "and hits nothing; scale the scene up");
+}
+
 }  // namespace
 
 std::string lowercase_extension(const std::string& path) {
@@ -94,10 +122,25 @@ Mesh baked_mesh(const Scene& scene) {
 }
 
 Scene load_scene(const std::string& name) {
+    return load_scene(name, [](const SceneSize&) {});
+}
+
+Scene load_scene(const std::string& name, const SceneSizeCheck& fits) {
+    if (name.starts_with("gen:")) fits(generated_scene_size(name));
     Scene scene = load_by_kind(name);
+    if (!name.starts_with("gen:")) fits(scene_size(scene));
     if (instanced_triangle_count(scene) == 0)
         throw InputError("'" + (name.empty() ? std::string("default scene") : name) + "': the scene has no triangles");
     return scene;
+}
+
+SceneSize scene_size(const Scene& scene) {
+    SceneSize size{0, 0, instanced_triangle_count(scene), scene.instances.size()};
+    for (const Mesh& mesh : scene.meshes) {
+        size.vertices += mesh.positions.size();
+        size.triangles += mesh.triangles.size();
+    }
+    return size;
 }
 
 uint64_t instanced_triangle_count(const Scene& scene) {
@@ -124,6 +167,7 @@ FlatScene flatten(const Scene& scene) {
         if (with_materials) append_materials(mesh, flat);
         offset += mesh.triangles.size();
     }
+    check_representable(scene.name, flat.bounds);
     return flat;
 }
 

@@ -2,9 +2,11 @@
 // The loaded scene: meshes made of objects (OBJ o/g groups), instances placing meshes, a camera.
 // Only positions and faces are kept: canopy loads no attribute that it does not use.
 #include "accel/geometry.h"
+#include "accel/memory_budget.h"
 
 #include <glm/mat4x4.hpp>
 #include <cstdint>
+#include <functional>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -68,6 +70,8 @@ struct FlatScene {
     BBox bounds;
 };
 
+// Throws InputError for a scene whose coordinates are beyond 1e12 or which is less than 1e-12 across: canopy's
+// single-precision intersection test hits nothing there.
 FlatScene flatten(const Scene& scene);
 
 // BENCHMARK.md: target = bounds centre, eye = centre + normalize(0, 0.35, 1) * 1.1 * |diagonal|.
@@ -81,6 +85,14 @@ inline Camera scene_camera(const Scene& scene, const FlatScene& flat) {
 // Loads a scene from a path (.json scene file or .obj) or a generator spec "gen:NAME?tris=N&seed=S".
 // The empty name loads the embedded default scene.
 Scene load_scene(const std::string& name);
+
+// Sees a scene's size and throws to refuse it (require_memory does, with an estimate of the build).
+using SceneSizeCheck = std::function<void(const SceneSize&)>;
+// load_scene, asking `fits` first: for a generator spec before any of it is generated, for a file once loaded
+// (the loaders only allocate what the file's bytes hold), before instancing can multiply it.
+Scene load_scene(const std::string& name, const SceneSizeCheck& fits);
+
+SceneSize scene_size(const Scene& scene);
 
 // Triangle count of the scene with instancing expanded.
 uint64_t instanced_triangle_count(const Scene& scene);

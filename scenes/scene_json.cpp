@@ -85,7 +85,8 @@ public:
     // Unknown keys are errors: a misspelt "instance" would otherwise be silently ignored.
     void expect_object(const json& value, const std::string& field, std::initializer_list<const char*> keys) const {
         if (!value.is_object()) fail(field, field.empty() ? "the top level must be an object" : "must be an object");
-        for (const auto& [key, member] : value.items()) {
+        for (const auto& item : value.items()) {  // no structured binding: clang before 16 cannot capture one
+            const std::string& key = item.key();
             if (std::find_if(keys.begin(), keys.end(), [&](const char* k) { return key == k; }) == keys.end())
                 fail(join(field, key.c_str()), "unknown field");
         }

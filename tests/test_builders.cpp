@@ -1,5 +1,6 @@
 // Structural invariants of every builder's trees, SAH by eq. 1, thread-count independence.
 #include "oracle.h"
+#include "test_scale.h"
 
 #include <tbb/global_control.h>
 
@@ -126,7 +127,7 @@ TEST_CASE("SAH follows eq. 1 of the quality-metrics paper", "[metrics]") {
 }
 
 TEST_CASE("the tree is the same with 1 and 2 threads", "[builders]") {
-    const FlatScene flat = flatten(load_scene("gen:cylinders?tris=60000&seed=7"));
+    const FlatScene flat = flatten(load_scene(scaled_spec("cylinders", 60000, 7)));
     for (const BuilderEntry& builder : builders()) {
         Bvh one, two;
         {

@@ -1,5 +1,6 @@
 // Every builder x kernel agrees with brute force on random rays.
 #include "oracle.h"
+#include "test_scale.h"
 
 #include <filesystem>
 
@@ -7,11 +8,11 @@ using namespace canopy;
 using namespace canopy::test;
 
 TEST_CASE("builders and kernels agree with brute force on procedural scenes", "[oracle]") {
-    const char* specs[] = {"gen:box?tris=12000&seed=3", "gen:cylinders?tris=12000&seed=4",
-                           "gen:surface?tris=12000&seed=5", "gen:triangles?tris=3000&seed=6"};
-    for (const char* spec : specs) {
+    const std::string specs[] = {scaled_spec("box", 12000, 3), scaled_spec("cylinders", 12000, 4),
+                                 scaled_spec("surface", 12000, 5), scaled_spec("triangles", 3000, 6)};
+    for (const std::string& spec : specs) {
         const FlatScene flat = flatten(load_scene(spec));
-        check_against_oracle(flat.triangles, random_rays(flat.triangles, 100000, 17), spec);
+        check_against_oracle(flat.triangles, random_rays(flat.triangles, scaled(100000), 17), spec);
     }
 }
 
@@ -24,13 +25,13 @@ TEST_CASE("builders and kernels agree with brute force on shared scenes", "[orac
             continue;
         }
         const FlatScene flat = flatten(load_scene(path.string()));
-        check_against_oracle(flat.triangles, random_rays(flat.triangles, 10000, 23), name);
+        check_against_oracle(flat.triangles, random_rays(flat.triangles, scaled(10000, 1000), 23), name);
     }
 }
 
 TEST_CASE("rays with bounded intervals agree with brute force", "[oracle]") {
-    const FlatScene flat = flatten(load_scene("gen:box?tris=4000&seed=8"));
-    std::vector<Ray> rays = random_rays(flat.triangles, 20000, 29);
+    const FlatScene flat = flatten(load_scene(scaled_spec("box", 4000, 8)));
+    std::vector<Ray> rays = random_rays(flat.triangles, scaled(20000), 29);
     const float diagonal = glm::length(flat.bounds.extent());
     for (size_t i = 0; i < rays.size(); ++i) {
         rays[i].tmin = (i % 3 == 0) ? 0.05f * diagonal : 0.0f;
@@ -40,15 +41,17 @@ TEST_CASE("rays with bounded intervals agree with brute force", "[oracle]") {
 }
 
 TEST_CASE("Möller–Trumbore kernels agree with brute-force Möller–Trumbore", "[oracle][fast]") {
-    for (const char* spec : {"gen:box?tris=12000&seed=3", "gen:cylinders?tris=12000&seed=4"}) {
+    for (const std::string& spec : {scaled_spec("box", 12000, 3), scaled_spec("cylinders", 12000, 4)}) {
         const FlatScene flat = flatten(load_scene(spec));
-        check_against_oracle<true, MollerTrumboreRay>(flat.triangles, off_surface(random_rays(flat.triangles, 60000, 19)), spec);
+        check_against_oracle<true, MollerTrumboreRay>(flat.triangles, off_surface(random_rays(flat.triangles, scaled(60000), 19)), spec);
     }
 }
 
 TEST_CASE("fast traversal loses at most a few grazing rays", "[oracle][fast]") {
-    // Without the padding of the far distance a box may be culled by rounding: allow 1 ray in 10,000.
-    const FlatScene flat = flatten(load_scene("gen:surface?tris=12000&seed=5"));
-    const std::vector<Ray> rays = random_rays(flat.triangles, 50000, 21);
-    check_against_oracle<false, WatertightRay>(flat.triangles, rays, "surface, fast traversal", rays.size() / 10000);
+    // Without the padding of the far distance a box may be culled by rounding: allow 1 ray in 10,000 (at least
+    // one, for the few rays of a scaled-down run).
+    const FlatScene flat = flatten(load_scene(scaled_spec("surface", 12000, 5)));
+    const std::vector<Ray> rays = random_rays(flat.triangles, scaled(50000), 21);
+    check_against_oracle<false, WatertightRay>(flat.triangles, rays, "surface, fast traversal",
+                                               std::max<size_t>(1, rays.size() / 10000));
 }

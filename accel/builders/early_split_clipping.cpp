@@ -69,16 +69,22 @@ float automatic_sa_max(std::span<const Triangle> triangles, const std::vector<Pr
     return sa_max > 0.0f ? sa_max : std::numeric_limits<float>::infinity();  // most triangles degenerate
 }
 
-std::vector<PrimRef> early_split_clip_refs(std::span<const Triangle> triangles, std::vector<PrimRef>&& refs, float sa_max) {
+std::vector<PrimRef> early_split_clip_refs(std::span<const Triangle> triangles, std::vector<PrimRef>&& refs, float sa_max,
+                                           uint64_t max_references) {
     if (!(sa_max > 0.0f))
         throw std::invalid_argument("esc: SA_max must be > 0 (or 0 in EscSettings for automatic), got " + std::to_string(sa_max));
     const size_t n = refs.size();
     std::vector<uint32_t> pieces(n);
-    parallel::for_each(n, kGrain, [&](size_t i) {
-        pieces[i] = refs[i].bounds().area() <= sa_max ? 1 : clip_until_small(triangles[refs[i].prim], refs[i].bounds(), sa_max, [](const BBox&) {});
-    });
     std::vector<uint64_t> offset(n + 1, 0);
-    for (size_t i = 0; i < n; ++i) offset[i + 1] = offset[i] + pieces[i];
+    // Terminates: once SA_max exceeds every box's area (at the latest when it overflows to infinity), each
+    // triangle is one piece, and n references always fit.
+    for (;; sa_max *= 2.0f) {
+        parallel::for_each(n, kGrain, [&](size_t i) {
+            pieces[i] = refs[i].bounds().area() <= sa_max ? 1 : clip_until_small(triangles[refs[i].prim], refs[i].bounds(), sa_max, [](const BBox&) {});
+        });
+        for (size_t i = 0; i < n; ++i) offset[i + 1] = offset[i] + pieces[i];
+        if (offset[n] <= std::max<uint64_t>(max_references, n)) break;
+    }
     if (offset[n] == n) return std::move(refs);
     std::vector<PrimRef> out(offset[n]);
     parallel::for_each(n, kGrain, [&](size_t i) {
@@ -98,7 +104,8 @@ Bvh build_esc_with(BuildInput&& input, const BuildSettings& settings, const EscS
         throw std::invalid_argument("esc: SA_max must be finite and >= 0 (0: automatic), got " + std::to_string(esc.sa_max));
     auto clip = [&](std::span<const Triangle> triangles, std::vector<PrimRef>&& refs) {
         const float sa_max = esc.sa_max > 0.0f ? esc.sa_max : automatic_sa_max(triangles, refs);
-        return std::isfinite(sa_max) && sa_max > 0.0f ? early_split_clip_refs(triangles, std::move(refs), sa_max)
+        const auto cap = uint64_t(kMaxEscReferencesPerTriangle * double(refs.size()));
+        return std::isfinite(sa_max) && sa_max > 0.0f ? early_split_clip_refs(triangles, std::move(refs), sa_max, cap)
                                                        : std::move(refs);
     };
     return build_after_split_pass(std::move(input), settings, clip, &build_binned_sah);

@@ -14,7 +14,12 @@ struct EscSettings {
 // clipped to the triangle, until every piece's box has a surface area of at most `sa_max`. A triangle is cut
 // into at most 2^kMaxEscDepth pieces (boxes too small for float halving stop early). Deterministic.
 constexpr int kMaxEscDepth = 10;
-std::vector<PrimRef> early_split_clip_refs(std::span<const Triangle> triangles, std::vector<PrimRef>&& refs, float sa_max);
+// When the pieces would number more than max_references, SA_max doubles until they do not (build_esc passes
+// kMaxEscReferencesPerTriangle times the triangles: long needles across a scene would otherwise each become
+// 2^kMaxEscDepth pieces, gigabytes of references from a scene of megabytes).
+std::vector<PrimRef> early_split_clip_refs(std::span<const Triangle> triangles, std::vector<PrimRef>&& refs, float sa_max,
+                                           uint64_t max_references = UINT64_MAX);
+constexpr double kMaxEscReferencesPerTriangle = 4.0;
 
 // The automatic SA_max; Ernst and Greiner leave its choice open. Splitting pays where triangles' boxes are
 // mostly empty (slivers across the axes), and hurts where large boxes hold large, well-filled triangles (walls,
@@ -28,7 +33,8 @@ std::vector<PrimRef> early_split_clip_refs(std::span<const Triangle> triangles, 
 // Returns infinity for no splitting.
 float automatic_sa_max(std::span<const Triangle> triangles, const std::vector<PrimRef>& refs);
 
-// early_split_clip_refs, then binned SAH (accel/binned_sah.h) on the grown references.
+// early_split_clip_refs within kMaxEscReferencesPerTriangle, then binned SAH (accel/binned_sah.h) on the grown
+// references.
 Bvh build_esc_with(BuildInput&& input, const BuildSettings& settings, const EscSettings& esc);
 Bvh build_esc(BuildInput&& input, const BuildSettings& settings);
 

@@ -4,6 +4,8 @@
 #include "accel/morton.h"
 #include "accel/parallel.h"
 
+#include <algorithm>
+#include <cmath>
 #include <limits>
 #include <stdexcept>
 
@@ -82,9 +84,9 @@ private:
         boxes_.swap(next_boxes_);
     }
 
-    // The cluster within `radius_` positions whose merge with cluster i has the smallest area; ties go to the
-    // lower position, so the closest pair overall is always mutual and every step merges at least once. That
-    // holds where areas overflow float too (scenes beyond about 1e19): every area is then a tie.
+    // The cluster within `radius_` positions whose merge with cluster i has the smallest area; ties broken by
+    // pair_precedes, a total order on pairs, so the least pair overall is always mutual and every step merges at
+    // least once. That holds where areas overflow float too (scenes beyond about 1e19): every area is then a tie.
     uint32_t nearest_neighbour(uint32_t i) const {
         const uint32_t m = uint32_t(clusters_.size());
         const uint32_t begin = i > radius_ ? i - radius_ : 0, end = std::min(m, i + radius_ + 1);
@@ -92,10 +94,23 @@ private:
         float best_area = std::numeric_limits<float>::infinity();
         for (uint32_t j = begin; j < end; ++j) {
             if (j == i) continue;
-            const float area = merge(boxes_[i], boxes_[j]).half_area();
-            if (best == i || area < best_area) best = j, best_area = area;
+            float area = merge(boxes_[i], boxes_[j]).half_area();
+            if (std::isnan(area)) area = std::numeric_limits<float>::infinity();  // an infinite extent times a zero one
+            if (best == i || area < best_area || (area == best_area && pair_precedes(i, j, best))) best = j, best_area = area;
         }
         return best;
+    }
+
+    // Whether pair {i, j} comes before pair {i, k} among merges of equal area: the nearer positions first, then
+    // the pair whose lower position is even, then the lower. On clusters of equal boxes (a scene of identical
+    // triangles) every even position pairs with the next, halving the clusters each step; ties going to the
+    // lowest position instead merged one pair per step, and a million identical triangles never finished.
+    static bool pair_precedes(uint32_t i, uint32_t j, uint32_t k) {
+        const uint32_t to_j = i > j ? i - j : j - i, to_k = i > k ? i - k : k - i;
+        if (to_j != to_k) return to_j < to_k;
+        const uint32_t low_j = std::min(i, j), low_k = std::min(i, k);
+        if (low_j % 2 != low_k % 2) return low_j % 2 == 0;
+        return low_j < low_k;
     }
 
     const std::vector<PrimRef>& refs_;

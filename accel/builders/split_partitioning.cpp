@@ -43,6 +43,7 @@ struct SplitSets {
     std::vector<std::pair<BBox, BBox>> pieces;  // by overlap, left piece and right piece
     BBox left, right;
     uint32_t left_count = 0, right_count = 0;
+    uint32_t both = 0;  // refs cut into two non-empty halves: each adds one reference
 };
 
 PrimRef with_bounds(const PrimRef& ref, const BBox& bounds) {
@@ -61,7 +62,8 @@ public:
     SplitPartitioner(std::span<const Triangle> triangles, uint32_t threshold, bool split, Partitioning& out)
         : triangles_(triangles), threshold_(std::max<uint32_t>(threshold, 1)), split_(split), out_(out) {}
 
-    std::vector<std::span<PrimRef>> partition(Region region) {
+    // `spare`: the PrimRef slots that this partition's subtree may still allocate in new regions (moved partitions).
+    std::vector<std::span<PrimRef>> partition(Region region, uint64_t spare) {
         if (region.size <= threshold_) return {std::span(region.base, region.size)};
         const BBox centroids = centroid_bounds(region);
         const int axis = centroids.largest_axis();
@@ -75,15 +77,19 @@ public:
         if (split_ && !(left.overlaps.empty() && right.overlaps.empty())) {
             from_left = clip_overlaps(region, cut, left);
             from_right = clip_overlaps(region, cut, right);
-            use_halves = split_is_cheaper(left, right, from_left, from_right);
+            use_halves = split_is_cheaper(left, right, from_left, from_right) &&
+                         moved_capacity(region, right, from_left, from_right) <= spare;
         }
+        if (use_halves) spare -= moved_capacity(region, right, from_left, from_right);
         const auto [left_region, right_region] = use_halves
                                                      ? replace_overlaps(region, left, right, from_left, from_right)
                                                      : rebalance(region, middle, region.size - middle, 0, 0);
+        // The spare slots are shared in proportion to the sides' sizes: the same at any thread count.
+        const uint64_t left_spare = spare * left_region.size / (uint64_t(left_region.size) + right_region.size);
         std::vector<std::span<PrimRef>> left_parts, right_parts;
         parallel::fork_join(
-            region.size, kParallelCutGrain, [&, l = left_region] { left_parts = partition(l); },
-            [&, r = right_region] { right_parts = partition(r); });
+            region.size, kParallelCutGrain, [&, l = left_region] { left_parts = partition(l, left_spare); },
+            [&, r = right_region] { right_parts = partition(r, spare - left_spare); });
         left_parts.insert(left_parts.end(), right_parts.begin(), right_parts.end());
         return left_parts;
     }
@@ -157,8 +163,16 @@ private:
         for (const auto& [l, r] : sets.pieces) {
             if (!l.empty()) sets.left.extend(l), ++sets.left_count;
             if (!r.empty()) sets.right.extend(r), ++sets.right_count;
+            sets.both += !l.empty() && !r.empty();
         }
         return sets;
+    }
+
+    // The slots replace_overlaps allocates for the right side when the halves outgrow the region, else 0.
+    static uint64_t moved_capacity(const Region& region, const Side& right, const SplitSets& from_left,
+                                   const SplitSets& from_right) {
+        if (uint64_t(region.size) + from_left.both + from_right.both <= region.capacity) return 0;
+        return uint64_t(std::ceil((right.size() + from_left.both) * kRegionPadding));
     }
 
     // Sec. 4.1: each overlap ref is replaced in place by its half on its own side; the other half joins the other
@@ -244,7 +258,9 @@ Partitioning partition_refs(std::span<const Triangle> triangles, std::span<const
     const uint32_t capacity = split ? uint32_t(std::ceil(n * kRegionPadding)) : n;
     PrimRef* root = partitioner.allocate(std::max<uint32_t>(capacity, 1));
     parallel::for_each(n, 64 * 1024, [&](size_t i) { root[i] = refs[i]; });
-    out.partitions = partitioner.partition({root, n, capacity});
+    // At most kMaxReferenceCapacity slots in all: the splits that would need more are not made.
+    const auto limit = uint64_t(kMaxReferenceCapacity * double(n));
+    out.partitions = partitioner.partition({root, n, capacity}, limit > capacity ? limit - capacity : 0);
     return out;
 }
 

@@ -4,6 +4,7 @@
 #include "kernels/dispatch.h"
 #include "renderer/accelerator.h"
 #include "renderer/commands/dynamic.h"
+#include "renderer/commands/render.h"
 #include "renderer/wavefront.h"
 
 #include <nlohmann/json.hpp>
@@ -102,6 +103,23 @@ bool builds_its_accelerator(const std::vector<Entry>& entries, size_t i) {
 // --start applies to the optimisers in a bench; plain builders in the same run ignore it.
 std::string optimiser_start(const std::string& builder, const std::string& start) {
     return builder != "auto" && find_builder(builder).default_start ? start : "";
+}
+
+// Every row keeps its accelerator from its build to the report: the memory to plan for is all of them. Rows
+// that differ only by traversal mode, intersector or collapse are separate builds of the same size.
+std::vector<BuildPlan> build_plans(const BenchOptions& o) {
+    std::vector<BuildPlan> plans;
+    const size_t copies = o.traversals.size() * o.intersectors.size() * o.collapses.size();
+    for (const std::string& toplevel : o.toplevels)
+        for (const std::string& builder : toplevel == "flat" || o.blas_builders.empty() ? o.builders : o.blas_builders)
+            for (const std::string& kernel : o.kernels)
+                plans.insert(plans.end(), copies * o.frames_planned.size(), {builder, kernel_width(kernel), toplevel != "flat"});
+    const bool two_level = std::any_of(o.toplevels.begin(), o.toplevels.end(), [](const std::string& t) { return t != "flat"; });
+    for (size_t q = 0; q < o.embree_qualities.size(); ++q) {
+        plans.push_back({"embree", 8, false});
+        if (two_level) plans.push_back({"embree", 8, true});
+    }
+    return plans;
 }
 
 std::vector<Entry> make_entries(const Scene& scene, const FlatScene& flat, const BenchOptions& o) {
@@ -377,7 +395,8 @@ void report_static(const std::vector<Entry>& entries, const BenchOptions& o, uin
 
 void run_bench(const BenchOptions& o) {
     auto start = Clock::now();
-    const Scene scene = load_scene(o.scene);
+    const std::vector<BuildPlan> plans = build_plans(o);
+    const Scene scene = load_scene_within_memory(o.scene, plans, o.memory_limit);
     const double load_ms = ms_since(start);
     start = Clock::now();
     FlatScene flat = flatten(scene);  // a dynamic object moves in it

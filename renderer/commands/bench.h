@@ -1,4 +1,5 @@
 #pragma once
+#include <cstdint>
 #include <optional>
 #include <string>
 #include <vector>
@@ -32,6 +33,7 @@ struct BenchOptions {
     // Dynamic-in-static (renderer/dynamic.h): the object that moves every frame ("auto", an index or a name);
     // none for a static scene. Rebuilds are then timed per frame instead of --builds builds.
     std::optional<std::string> dynamic;
+    std::optional<uint64_t> memory_limit;  // bytes: lowers the memory bound below what the machine has free
 };
 
 // Runs ../shared/BENCHMARK.md's measurement for every requested accelerator in one process,

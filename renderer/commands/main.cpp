@@ -25,6 +25,10 @@ constexpr const char* kBatchTraversalHelp =
     "Stream tracer: how canopy traces a sorted batch: packet (16-ray packets, 8 without AVX-512, single rays below "
     "10; the fastest on diffuse rays), single (ray by ray), stream (ray streams)";
 
+constexpr const char* kMemoryLimitHelp =
+    "Refuse scenes whose estimated peak memory (scene, PrimRefs, trees) exceeds these bytes (suffixes k, M, G: "
+    "powers of 1024); the bound is otherwise the memory the machine and its cgroup have available";
+
 // Freed memory stays in the process for the next build instead of going back to the kernel: glibc otherwise maps
 // large arrays afresh for every build and unmaps them when freed, and on this project's VM the page faults of
 // touching them again cost more than the work (a 2-million-triangle collapse: 0.7 s of faults for 0.1 s of
@@ -75,6 +79,7 @@ int main(int argc, char** argv) {
         ->check(CLI::Range(1, 1 << 24))->capture_default_str();
     render->add_option("--batch-traversal", r.batch_traversal, kBatchTraversalHelp)
         ->check(CLI::IsMember({"single", "packet", "stream"}))->capture_default_str();
+    render->add_option("--memory-limit", r.memory_limit, kMemoryLimitHelp)->transform(CLI::AsSizeValue(false));
     render->add_option("--collapse", r.collapse, "Binary tree to bvh4/bvh8: optimal (Ylitie et al. 2017) or greedy (largest area first)")
         ->check(CLI::IsMember({"optimal", "greedy"}))->capture_default_str();
 
@@ -126,6 +131,7 @@ int main(int argc, char** argv) {
                           "and render are timed. An object or mesh name, a placement index, or auto (alone: the largest "
                           "object spanning at most a quarter of the scene); --builds is then 1")
             ->expected(0, 1)->default_str("auto");
+    bench->add_option("--memory-limit", b.memory_limit, kMemoryLimitHelp)->transform(CLI::AsSizeValue(false));
     std::vector<int> bench_size{1024, 768};
     bench->add_option("--size", bench_size, "Width and height")->expected(2)->check(CLI::Range(1, 16384))->capture_default_str();
 

@@ -1,6 +1,7 @@
 #include "renderer/commands/render.h"
 
 #include "accel/builder.h"
+#include "kernels/dispatch.h"
 #include "renderer/accelerator.h"
 #include "renderer/commands/heatmap.h"
 
@@ -54,10 +55,20 @@ void check_blas_builder(const std::string& blas, const std::vector<std::string>&
     }
 }
 
+Scene load_scene_within_memory(const std::string& name, std::span<const BuildPlan> plans,
+                               std::optional<uint64_t> memory_limit) {
+    const MemoryAvailable available = available_memory(memory_limit);
+    return load_scene(name, [&](const SceneSize& size) {
+        require_memory(name.empty() ? "the default scene" : name, estimate_memory(size, plans), available);
+    });
+}
+
 void run_render(RenderOptions o) {
     check_blas_builder(o.blas_builder, {o.toplevel});
     if (!o.blas_builder.empty()) o.builder = o.blas_builder;  // a two-level render has no flat BVH
-    const Scene scene = load_scene(o.scene);
+    const BuildPlan plan = o.accel == "embree" ? BuildPlan{"embree", 8, false}
+                                               : BuildPlan{o.builder, kernel_width(o.kernel), o.toplevel != "flat"};
+    const Scene scene = load_scene_within_memory(o.scene, {&plan, 1}, o.memory_limit);
     const FlatScene flat = flatten(scene);
     std::unique_ptr<Accelerator> accel =
         o.accel == "embree" ? make_embree_accelerator(flat, o.embree_quality, o.threads)

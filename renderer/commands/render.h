@@ -1,6 +1,11 @@
 #pragma once
 // `canopy render`: one scene, one accelerator, samples accumulated into an EXR (or a heat map of what primary
 // rays visit).
+#include "accel/memory_budget.h"
+#include "scenes/scene.h"
+
+#include <optional>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -19,6 +24,7 @@ struct RenderOptions {
     std::string tracer = "single";       // single (one path at a time) or stream (wavefront, sorted ray batches)
     uint32_t stream_paths = 1u << 18;    // stream: paths in flight per batch
     std::string batch_traversal = "packet";  // stream: how batches are traced: single, packet, stream
+    std::optional<uint64_t> memory_limit;    // bytes: lowers the memory bound below what the machine has free
 };
 
 // Every registered builder's name, for the options' help.
@@ -27,6 +33,11 @@ std::string builder_names();
 void print_progress(float fraction);
 // --blas-builder names the object trees' builder, which only two-level top levels have.
 void check_blas_builder(const std::string& blas, const std::vector<std::string>& toplevels);
+
+// load_scene, refused with a MemoryError when the scene and the planned builds would not fit in the memory
+// available (accel/memory_budget.h): a generator spec before it generates anything, a file before flatten().
+Scene load_scene_within_memory(const std::string& name, std::span<const BuildPlan> plans,
+                               std::optional<uint64_t> memory_limit);
 
 void run_render(RenderOptions options);
 

@@ -1,0 +1,182 @@
+#include "accel/memory_budget.h"
+
+#include "accel/builders/early_split_clipping.h"
+#include "accel/builders/presplit.h"
+#include "accel/builders/sbvh.h"
+#include "accel/builders/split_partitioning.h"
+#include "accel/bvh.h"
+#include "accel/wide_bvh.h"
+
+#include <algorithm>
+#include <cstdio>
+#include <fstream>
+#include <initializer_list>
+#include <sstream>
+
+namespace canopy {
+namespace {
+
+// Vectors grown one element at a time (loaders, generators) hold up to twice their size, and a reallocation
+// briefly holds the old array beside the new one.
+constexpr uint64_t kGrowthSlack = 2;
+constexpr uint64_t kVertexBytes = sizeof(Vec3);
+constexpr uint64_t kMeshTriangleBytes = sizeof(glm::uvec3) + sizeof(uint32_t);  // indices and material
+constexpr uint64_t kFlatTriangleBytes = sizeof(Triangle) + sizeof(uint32_t);    // world triangle and material
+// A PrimRef array and the builders' second array of the same size (partition buffers, sorted copies, clustering).
+constexpr uint64_t kReferenceBytes = 2 * sizeof(PrimRef);
+// At most 2n - 1 nodes for n leaf references, and the references themselves.
+constexpr uint64_t kBinaryBytesPerReference = 2 * sizeof(BvhNode) + sizeof(uint32_t);
+// A wide node per N / 2 references at most (every inner node of the binary tree is a wide node only when the
+// collapse opens nothing, then every wide node holds at least 2 children); leaves: a LeafTriangle each for
+// bvh2, and for the SIMD widths up to half the lanes of a triangle block left empty.
+constexpr uint64_t wide_node_bytes_per_reference(int width) {
+    switch (width) {
+        case 2: return sizeof(WideNode<2>);
+        case 4: return sizeof(WideNode<4>) / 2;
+        default: return sizeof(WideNode<8>) / 4;
+    }
+}
+constexpr uint64_t leaf_bytes_per_reference(int width) {
+    if (width == 2) return sizeof(LeafTriangle);
+    return 2 * sizeof(LeafOf<8>) / uint64_t(block_lanes(8));
+}
+// A two-level placement: its inverse and world transforms, and the top level's BRefs (re-braiding opens a
+// placement into a bounded number of them) with their share of top-level nodes.
+constexpr uint64_t kPlacementBytes = 1024;
+
+// Builders whose reference count grows beyond the triangle count, and the most slots they allocate per triangle.
+struct ReferenceCap {
+    const char* builder;
+    double per_triangle;
+};
+const ReferenceCap kReferenceCaps[] = {
+    {"sbvh", SbvhSettings{}.max_references_per_triangle},
+    {"presplit", 1.0 + PresplitSettings{}.budget},
+    {"esc", kMaxEscReferencesPerTriangle},
+    {"streelet", 1.3},      // streelet.cpp: a 30% pre-split quota
+    {"bonsai-split", kMaxReferenceCapacity},
+    {"sweep-presplit", kMaxReferenceCapacity},
+};
+
+// The builders `--builder auto` chooses from (renderer/auto_builder.cpp): its estimate is the largest of theirs.
+constexpr const char* kAutoCandidates[] = {"binned", "bonsai-split", "esc", "bittner", "lbvh"};
+
+MemoryEstimate build_terms(const SceneSize& size, const BuildPlan& plan) {
+    MemoryEstimate e;
+    const uint64_t triangles = plan.two_level ? size.triangles : size.instanced_triangles;
+    const auto references = uint64_t(double(triangles) * reference_cap_per_triangle(plan.builder)) + 1;
+    e.references = references * kReferenceBytes;
+    e.binary = references * kBinaryBytesPerReference;
+    e.layout = references * (wide_node_bytes_per_reference(plan.width) + leaf_bytes_per_reference(plan.width));
+    if (plan.two_level) {
+        e.flat = size.triangles * sizeof(Triangle);  // object-space copies of every object's triangles
+        e.layout += size.instances * kPlacementBytes;
+    }
+    return e;
+}
+
+MemoryEstimate plan_terms(const SceneSize& size, const BuildPlan& plan) {
+    if (plan.builder != "auto") return build_terms(size, plan);
+    MemoryEstimate largest = build_terms(size, {"binned", plan.width, true});
+    for (const char* candidate : kAutoCandidates) {
+        const MemoryEstimate e = build_terms(size, {candidate, plan.width, false});
+        if (e.total() > largest.total()) largest = e;
+    }
+    return largest;
+}
+
+// A "Key:   123 kB" line of /proc/meminfo, in bytes.
+std::optional<uint64_t> meminfo_bytes(const std::string& key) {
+    std::ifstream in("/proc/meminfo");
+    for (std::string line; std::getline(in, line);) {
+        if (!line.starts_with(key + ":")) continue;
+        uint64_t kib = 0;
+        std::istringstream(line.substr(key.size() + 1)) >> kib;
+        return kib * 1024;
+    }
+    return std::nullopt;
+}
+
+// One number in a file; nothing for "max", a missing file or anything else.
+std::optional<uint64_t> number_in_file(const std::string& path) {
+    std::ifstream in(path);
+    uint64_t value = 0;
+    if (!(in >> value)) return std::nullopt;
+    return value;
+}
+
+uint64_t resident_bytes() {
+    std::ifstream in("/proc/self/statm");
+    uint64_t size = 0, resident = 0;
+    in >> size >> resident;
+    return resident * 4096;
+}
+
+struct CgroupFiles {
+    const char* limit;
+    const char* usage;
+};
+
+}  // namespace
+
+double reference_cap_per_triangle(const std::string& builder) {
+    for (const ReferenceCap& cap : kReferenceCaps)
+        if (builder == cap.builder) return cap.per_triangle;
+    return 1.0;
+}
+
+MemoryEstimate estimate_memory(const SceneSize& size, std::span<const BuildPlan> plans) {
+    MemoryEstimate total;
+    total.scene = kGrowthSlack * (size.vertices * kVertexBytes + size.triangles * kMeshTriangleBytes);
+    total.flat = size.instanced_triangles * kFlatTriangleBytes;
+    for (const BuildPlan& plan : plans) {
+        const MemoryEstimate e = plan_terms(size, plan);
+        total.flat += e.flat;
+        total.references += e.references;
+        total.binary += e.binary;
+        total.layout += e.layout;
+    }
+    return total;
+}
+
+std::string format_bytes(uint64_t bytes) {
+    constexpr const char* units[] = {"KiB", "MiB", "GiB", "TiB"};
+    if (bytes < 1024) return std::to_string(bytes) + " bytes";
+    double value = double(bytes) / 1024.0;
+    int unit = 0;
+    for (; value >= 1024.0 && unit < 3; ++unit) value /= 1024.0;
+    char text[32];
+    std::snprintf(text, sizeof text, "%.1f %s", value, units[unit]);
+    return text;
+}
+
+std::string MemoryEstimate::describe() const {
+    return format_bytes(total()) + " (scene " + format_bytes(scene) + ", flat triangles " + format_bytes(flat) +
+           ", PrimRefs " + format_bytes(references) + ", binary BVH " + format_bytes(binary) + ", traversal layout " +
+           format_bytes(layout) + ")";
+}
+
+MemoryAvailable available_memory(std::optional<uint64_t> limit) {
+    const uint64_t held = resident_bytes();
+    MemoryAvailable available{UINT64_MAX, "nothing: /proc/meminfo and the cgroup files are unreadable"};
+    if (const auto free = meminfo_bytes("MemAvailable")) available = {*free + held, "MemAvailable in /proc/meminfo"};
+    for (const CgroupFiles files : {CgroupFiles{"/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory.current"},
+                                    CgroupFiles{"/sys/fs/cgroup/memory/memory.limit_in_bytes",
+                                                "/sys/fs/cgroup/memory/memory.usage_in_bytes"}}) {
+        const auto cap = number_in_file(files.limit), used = number_in_file(files.usage);
+        if (!cap || !used) continue;
+        const uint64_t left = (*cap > *used ? *cap - *used : 0) + held;
+        if (left < available.bytes) available = {left, std::string("the cgroup limit in ") + files.limit};
+    }
+    if (limit && *limit < available.bytes) available = {*limit, "--memory-limit"};
+    return available;
+}
+
+void require_memory(const std::string& what, const MemoryEstimate& estimate, const MemoryAvailable& available) {
+    if (estimate.total() <= available.bytes) return;
+    throw MemoryError(what + ": not enough memory: building it needs about " + estimate.describe() + ", but " +
+                      format_bytes(available.bytes) + " is available (" + available.source +
+                      "); try a smaller scene or a builder that does not split");
+}
+
+}  // namespace canopy
