@@ -53,13 +53,25 @@ struct NoCount {
     void inner() {}
     void leaf() {}
     void triangles(uint32_t) {}
+    void touch(const void*, size_t) {}
 };
 
+// What a ray visited in the single-ray kernels, and the 64-byte cache lines its nodes and leaves span (the memory
+// a visit reads, whatever the layout: a BVH8 node is 4 lines, a block of 8 triangles 5).
 struct TraversalCounts {
-    uint64_t inner_nodes = 0, leaf_nodes = 0, triangle_tests = 0;
+    uint64_t inner_nodes = 0, leaf_nodes = 0, triangle_tests = 0, cache_lines = 0;
     void inner() { ++inner_nodes; }
     void leaf() { ++leaf_nodes; }
     void triangles(uint32_t n) { triangle_tests += n; }
+    void touch(const void* p, size_t bytes) {
+        const auto first = reinterpret_cast<uintptr_t>(p);
+        cache_lines += (first + bytes - 1) / 64 - first / 64 + 1;
+    }
+    TraversalCounts& operator+=(const TraversalCounts& o) {
+        inner_nodes += o.inner_nodes, leaf_nodes += o.leaf_nodes, triangle_tests += o.triangle_tests;
+        cache_lines += o.cache_lines;
+        return *this;
+    }
 };
 
 namespace detail {
@@ -219,6 +231,7 @@ template <int N, class TriangleTest, class Counter>
                                                   const TriangleTest& tri_ray, float tmin, Hit& hit, Counter& counter) {
     counter.leaf();
     counter.triangles(leaf.count);
+    counter.touch(&bvh.leaves[leaf.child], sizeof(bvh.leaves[0]) * (N == 2 ? leaf.count : leaf_entries(N, leaf.count)));
     bool found = false;
     if constexpr (N == 2) {
         for (uint32_t i = leaf.child; i < leaf.child + leaf.count; ++i) {
@@ -284,6 +297,7 @@ template <Query Q, int N, class Tree, class Counter, class LeafFn>
         if (current.count == 0) {
             counter.inner();
             const WideNode<N>& node = nodes[current.child];
+            counter.touch(&node, sizeof(node));
             prefetch_child_line(node);
             std::array<float, N> tnear;
             uint32_t mask = intersect_children<N>(node, ray, t_min, tfar, tnear);

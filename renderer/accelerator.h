@@ -61,6 +61,11 @@ public:
     // The same query through the counting variant of the kernel: what the ray visited. Throws
     // std::invalid_argument for an accelerator that cannot count (Embree).
     virtual TraversalCounts count(const Ray& ray) const = 0;
+    // Frame `frame` as render() traces it one ray at a time, every ray through the counting kernel: what the frame's
+    // rays visited in all, and how many there were. Untimed (the counts cost time); throws std::invalid_argument
+    // for an accelerator that cannot count (Embree).
+    virtual std::pair<TraversalCounts, uint64_t> count_frame(const ShadingScene& scene, const PinholeCamera& camera,
+                                                             uint32_t frame) const = 0;
     // Closest hits (Query::Closest) or any hits (Query::Any) of a batch, each the single-ray query's answer,
     // through the batch kernel's packets on the calling thread. Throws std::invalid_argument for an accelerator
     // without one (Embree, whose batches only the stream tracer drives).

@@ -8,6 +8,8 @@
 #include "renderer/wavefront.h"
 #include "renderer/auto_builder.h"
 
+#include <tbb/enumerable_thread_specific.h>
+
 #include <variant>
 
 namespace canopy {
@@ -17,6 +19,16 @@ template <class Layout, bool Robust, class TriangleTest>
 struct CanopyTracer {
     const Layout& bvh;
     bool closest(const Ray& ray, Hit& hit) const { return closest_hit<Robust, TriangleTest>(bvh, ray, hit); }
+};
+
+// The single-ray tracer through the counting kernel, each thread adding to its own counts.
+template <class Layout, bool Robust, class TriangleTest>
+struct CountingTracer {
+    const Layout& bvh;
+    tbb::enumerable_thread_specific<TraversalCounts>& counts;
+    bool closest(const Ray& ray, Hit& hit) const {
+        return traverse<Query::Closest, Robust, TriangleTest>(bvh, ray, hit, counts.local());
+    }
 };
 
 template <class Layout, bool Robust, class TriangleTest>
@@ -202,6 +214,17 @@ public:
         });
     }
 
+    std::pair<TraversalCounts, uint64_t> count_frame(const ShadingScene& scene, const PinholeCamera& camera,
+                                                     uint32_t frame) const override {
+        tbb::enumerable_thread_specific<TraversalCounts> counts;
+        Image unused(scene.settings.width, scene.settings.height);
+        const uint64_t rays = with_kernel([&]<int N, bool Robust, class Test>(const auto& bvh) {
+            using Layout = std::decay_t<decltype(bvh)>;
+            return render_frame(CountingTracer<Layout, Robust, Test>{bvh, counts}, scene, camera, frame, unused);
+        });
+        return {counts.combine([](TraversalCounts a, const TraversalCounts& b) { return a += b; }), rays};
+    }
+
     void trace_batch(Query query, std::span<const Ray> rays, std::span<Hit> hits) const override {
         with_kernel([&]<int N, bool Robust, class Test>(const auto& bvh) {
             StreamScratch<N> unused;  // packets need none
@@ -307,6 +330,10 @@ public:
     }
     Hit trace(const Ray& ray) const override { return built().trace(ray); }
     TraversalCounts count(const Ray& ray) const override { return built().count(ray); }
+    std::pair<TraversalCounts, uint64_t> count_frame(const ShadingScene& scene, const PinholeCamera& camera,
+                                                     uint32_t frame) const override {
+        return built().count_frame(scene, camera, frame);
+    }
     void trace_batch(Query query, std::span<const Ray> rays, std::span<Hit> hits) const override {
         built().trace_batch(query, rays, hits);
     }

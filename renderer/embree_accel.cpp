@@ -205,6 +205,9 @@ public:
     TraversalCounts count(const Ray&) const override {
         throw std::invalid_argument("Embree does not report what a ray visits: heatmaps need a canopy kernel");
     }
+    std::pair<TraversalCounts, uint64_t> count_frame(const ShadingScene&, const PinholeCamera&, uint32_t) const override {
+        throw std::invalid_argument("Embree does not report what a ray visits: lines per ray need a canopy kernel");
+    }
 
     void trace_batch(Query, std::span<const Ray>, std::span<Hit>) const override {
         throw std::invalid_argument("Embree's batches are traced by the stream tracer only: batch queries need a canopy kernel");

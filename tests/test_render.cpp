@@ -227,6 +227,65 @@ TEST_CASE("bench writes the documented JSON", "[bench][embree]") {
     CHECK(j["results"][1]["sah"].is_null());
     CHECK(j["results"][0]["image_mean"].get<double>() ==
           Approx(j["results"][1]["image_mean"].get<double>()).epsilon(0.02));
+    CHECK(j["results"][0]["lines_per_ray"].get<double>() > 0.0);
+    CHECK(j["results"][1]["lines_per_ray"].is_null());
+}
+
+TEST_CASE("bench runs once per thread count, each row saying which", "[bench][embree]") {
+    const std::string path = (std::filesystem::temp_directory_path() / "canopy_test_bench_threads.json").string();
+    BenchOptions o;
+    o.scene = "gen:box?tris=2000&seed=2";
+    o.embree_qualities = {"medium"};
+    o.builds = 1, o.frames = 1, o.width = 24, o.height = 16, o.epo = false;
+    o.threads = {1, 2};
+    o.json_path = path;
+    run_bench(o);
+    std::ifstream in(path);
+    const nlohmann::json j = nlohmann::json::parse(in);
+    CHECK(j["threads"] == nlohmann::json({1, 2}));
+    REQUIRE(j["results"].size() == 4);
+    const int expected[] = {1, 1, 2, 2};
+    for (size_t i = 0; i < 4; ++i) CHECK(j["results"][i]["threads"] == expected[i]);
+    // The same tree and rays under either count: what a ray visits does not depend on the threads.
+    CHECK(j["results"][0]["lines_per_ray"] == j["results"][2]["lines_per_ray"]);
+}
+
+// Frames through the counting kernel trace the rays render() traces, and read at least a node's lines per inner
+// node and a leaf entry's per leaf, at most an entry's per triangle tested.
+TEST_CASE("a counted frame's cache lines follow the layout's node and leaf sizes", "[render][counts]") {
+    const Scene scene = load_scene("gen:box?tris=3000&seed=4");
+    const FlatScene flat = flatten(scene);
+    const PinholeCamera camera(*scene.camera, 24, 16);
+    FrameSettings settings;
+    settings.width = 24, settings.height = 16;
+    const ShadingScene shading{flat, settings, nullptr};
+    const std::pair<int, double> node_lines[] = {{2, 1.0}, {4, 2.0}, {8, 4.0}};
+    for (const auto& [width, lines_per_node] : node_lines) {
+        CAPTURE(width);
+        auto accel = make_canopy_accelerator(flat, {"binned", "", "bvh" + std::to_string(width)});
+        accel->prepare();
+        accel->build();
+        Image image(24, 16);
+        const uint64_t rays = accel->render(shading, camera, 1, image);
+        const auto [counts, counted_rays] = accel->count_frame(shading, camera, 1);
+        CHECK(counted_rays == rays);
+        const double entry_lines = width == 2 ? 48.0 / 64.0 : double(sizeof(TriangleBlock<block_lanes(4)>)) / 64.0;
+        CHECK(double(counts.cache_lines) >= lines_per_node * double(counts.inner_nodes) +
+                                              (width == 2 ? 1.0 : entry_lines) * double(counts.leaf_nodes));
+        CHECK(double(counts.cache_lines) <= lines_per_node * double(counts.inner_nodes) +
+                                              std::ceil(entry_lines + 1.0) * double(counts.triangle_tests));
+    }
+}
+
+TEST_CASE("a span of bytes touches the 64-byte lines it overlaps", "[counts]") {
+    TraversalCounts counts;
+    alignas(64) static const char memory[512] = {};
+    counts.touch(memory, 256);  // a BVH8 node on its own lines
+    CHECK(counts.cache_lines == 4);
+    counts.touch(memory + 32, 48);  // a binary leaf's triangle across a line boundary
+    CHECK(counts.cache_lines == 6);
+    counts.touch(memory + 63, 1);
+    CHECK(counts.cache_lines == 7);
 }
 
 TEST_CASE("heatmaps hold what the counting kernel reports per pixel", "[render][heatmap]") {

@@ -8,14 +8,17 @@
 #include "renderer/wavefront.h"
 
 #include <nlohmann/json.hpp>
+#include <tbb/global_control.h>
 
 #include <algorithm>
+#include <cmath>
 #include <chrono>
 #include <cstdio>
 #include <fstream>
 #include <numeric>
 #include <optional>
 #include <stdexcept>
+#include <tuple>
 
 namespace canopy {
 namespace {
@@ -45,18 +48,27 @@ struct Entry {
     uint64_t rays = 0;
     double image_mean = 0;
     AcceleratorReport report;  // taken once after the last build: EPO is not free
+    int threads = 0;         // the --threads value the row ran under (0: all)
+    std::string thread_tag;  // " 2 threads" in labels when the bench compares thread counts, else empty
+    std::optional<TraversalCounts> visits;  // canopy: the first timed frame's rays through the counting kernel
+    uint64_t counted_rays = 0;
 
     double build_min() const { return *std::min_element(build_ms.begin(), build_ms.end()); }
     double frame_mean() const { return mean(frame_ms); }
     double rebuild_mean() const { return mean(rebuild_ms); }
     double total_mean() const { return rebuild_mean() + frame_mean(); }  // Table 3's build + render
     double rays_per_frame() const { return double(rays) / double(frame_ms.size()); }
+    std::optional<double> per_ray(uint64_t TraversalCounts::*field) const {
+        if (!visits || counted_rays == 0) return std::nullopt;
+        return double((*visits).*field) / double(counted_rays);
+    }
     std::string label() const {
         const std::string suffix = tracer == TracerKind::Single ? "" : batch.empty() ? " stream" : " stream/" + batch;
-        if (accel->library() == "embree") return "embree " + accel->quality() + suffix;
+        if (accel->library() == "embree") return "embree " + accel->quality() + suffix + thread_tag;
         const std::string chosen = accel->chosen();
         const std::string planned = accel->frames_planned() ? "@" + std::to_string(accel->frames_planned()) : "";
-        return accel->builder() + planned + (chosen.empty() ? "" : "(" + chosen + ")") + " " + accel->kernel() + suffix;
+        return accel->builder() + planned + (chosen.empty() ? "" : "(" + chosen + ")") + " " + accel->kernel() + suffix +
+               thread_tag;
     }
     // The stream tracer's share of the timed frames spent sorting rays (all threads' time over threads x frames).
     double sort_share() const {
@@ -122,7 +134,13 @@ std::vector<BuildPlan> build_plans(const BenchOptions& o) {
     return plans;
 }
 
-std::vector<Entry> make_entries(const Scene& scene, const FlatScene& flat, const BenchOptions& o) {
+// "2 threads", "1 thread" or "all threads" (0).
+std::string threads_text(int threads) {
+    if (threads == 0) return "all threads";
+    return std::to_string(threads) + (threads == 1 ? " thread" : " threads");
+}
+
+std::vector<Entry> make_entries(const Scene& scene, const FlatScene& flat, const BenchOptions& o, int threads) {
     std::vector<Entry> entries;
     const uint64_t pixels = uint64_t(o.width) * uint64_t(o.height);
     for (const std::string& toplevel : o.toplevels)
@@ -149,10 +167,15 @@ std::vector<Entry> make_entries(const Scene& scene, const FlatScene& flat, const
                         }
     const bool two_level = std::any_of(o.toplevels.begin(), o.toplevels.end(), [](const std::string& t) { return t != "flat"; });
     for (const std::string& quality : o.embree_qualities) {
-        entries.push_back({make_embree_accelerator(flat, quality, o.threads)});
-        if (two_level) entries.push_back({make_embree_two_level_accelerator(scene, flat, quality, o.threads)});
+        entries.push_back({make_embree_accelerator(flat, quality, threads)});
+        if (two_level) entries.push_back({make_embree_two_level_accelerator(scene, flat, quality, threads)});
     }
-    return rows_per_tracer(std::move(entries), o);
+    std::vector<Entry> rows = rows_per_tracer(std::move(entries), o);
+    for (Entry& row : rows) {
+        row.threads = threads;
+        if (o.threads.size() > 1) row.thread_tag = " " + threads_text(threads);
+    }
+    return rows;
 }
 
 // The Embree row that ratios refer to: MEDIUM when present (like for like with binned SAH), with `tracer`; of
@@ -172,13 +195,35 @@ nlohmann::json or_null(const std::optional<T>& v) {
     return v ? nlohmann::json(*v) : nlohmann::json(nullptr);
 }
 
+// An estimate of Embree's cache lines per ray from its layout's published sizes (BVH8 nodes of 256 bytes, leaves of
+// Triangle4 blocks of 224 bytes, 4 triangles each) and the visits of the first canopy row of the same width, whose
+// binned SAH tree stands in for Embree MEDIUM's: nodes x 4 lines + leaves x Triangle4 blocks per leaf x 3.5 lines.
+std::optional<double> embree_lines_estimate(const std::vector<Entry>& entries) {
+    for (const Entry& e : entries) {
+        if (e.accel->library() != "canopy" || !e.visits || e.accel->kernel().rfind("bvh8", 0) != 0) continue;
+        const TraversalCounts& v = *e.visits;
+        if (v.leaf_nodes == 0) return std::nullopt;
+        const double blocks_per_leaf = std::ceil(double(v.triangle_tests) / double(v.leaf_nodes) / 4.0);
+        return (double(v.inner_nodes) * 4.0 + double(v.leaf_nodes) * blocks_per_leaf * 3.5) / double(e.counted_rays);
+    }
+    return std::nullopt;
+}
+
+std::string fixed1(double v) {
+    char text[32];
+    std::snprintf(text, sizeof text, "%.1f", v);
+    return text;
+}
+
 void print_table(const std::vector<Entry>& entries, uint64_t tris) {
     const Entry* ref = reference_of(entries);
+    const std::optional<double> embree_lines = embree_lines_estimate(entries);
     int width = 22;  // the label column fits the longest label
     for (const Entry& e : entries) width = std::max(width, int(e.label().size()));
     std::printf("\n%-*s %10s %8s %10s %8s %11s %8s %7s %7s %9s %9s %7s %8s %8s %7s %8s %10s", width,
                 "accelerator", "build ms", "Mprim/s", "frame ms", "Mrays/s", "rays/frame", "SAH", "EPO", "wSAH", "nodes",
                 "leaves", "split%", "split ms", "%build", "alloc%", "MB", "img mean");
+    std::printf(" %9s", "lines/ray");
     const bool streams = std::any_of(entries.begin(), entries.end(), [](const Entry& e) { return e.tracer == TracerKind::Stream; });
     if (ref) std::printf(" %9s %9s", "build/emb", "frame/emb");
     if (ref && streams) std::printf(" %10s", "frame/same");  // against Embree with the row's own tracer
@@ -203,6 +248,9 @@ void print_table(const std::vector<Entry>& entries, uint64_t tris) {
                                     100.0 * (*r.ref_capacity_per_tri - 1.0));
         else std::printf("%8s %8s %7s ", "-", "-", "-");
         std::printf("%8.1f %10.5f", r.bytes ? double(*r.bytes) / 1e6 : 0.0, e.image_mean);
+        if (const std::optional<double> lines = e.per_ray(&TraversalCounts::cache_lines)) std::printf(" %9.1f", *lines);
+        else if (e.accel->library() == "embree" && embree_lines) std::printf(" %9s", ("~" + fixed1(*embree_lines)).c_str());
+        else std::printf(" %9s", "-");
         if (ref) std::printf(" %9.3f %9.3f", e.build_min() / ref->build_min(), frame / ref->frame_mean());
         if (const Entry* same = reference_of(entries, e.tracer); ref && streams && same)
             std::printf(" %10.3f", frame / same->frame_mean());
@@ -210,14 +258,19 @@ void print_table(const std::vector<Entry>& entries, uint64_t tris) {
     }
     if (ref) std::printf("ratios against %s, measured in this run%s\n", ref->label().c_str(),
                          streams ? "; frame/same: against Embree MEDIUM with the row's tracer" : "");
+    std::printf("lines/ray: 64-byte lines of the nodes and leaves a ray of the first timed frame visits (single-ray "
+                "counting kernel)%s\n", embree_lines ? "; ~Embree: estimated from its node and leaf sizes over the "
+                "first canopy bvh8 row's visits" : "");
     for (const Entry& e : entries)
         if (e.tracer == TracerKind::Stream)
             std::printf("%s: sorting %.1f%% of the frame, stream memory %.1f MB (all threads)\n", e.label().c_str(),
                         100.0 * e.sort_share(), double(e.stream->bytes.load()) / 1e6);
 }
 
-nlohmann::json to_json(const std::vector<Entry>& entries, const BenchOptions& o, uint64_t tris) {
+// The rows of one thread count.
+nlohmann::json results_json(const std::vector<Entry>& entries, uint64_t tris) {
     nlohmann::json results = nlohmann::json::array();
+    const std::optional<double> embree_lines = embree_lines_estimate(entries);
     for (const Entry& e : entries) {
         const AcceleratorReport& r = e.report;
         const bool canopy = e.accel->library() == "canopy";
@@ -230,6 +283,7 @@ nlohmann::json to_json(const std::vector<Entry>& entries, const BenchOptions& o,
                            {"frames_planned", e.accel->frames_planned() ? nlohmann::json(e.accel->frames_planned()) : nlohmann::json(nullptr)},
                            {"quality", canopy ? nlohmann::json(nullptr) : nlohmann::json(e.accel->quality())},
                            {"tracer", tracer_name(e.tracer)},
+                           {"threads", e.threads},
                            {"batch_traversal", e.tracer != TracerKind::Stream ? nlohmann::json(nullptr)
                                                : canopy ? nlohmann::json(batch_traversal_name(e.settings.batch_traversal))
                                                : nlohmann::json(e.settings.embree_packets ? "rtcIntersect16" : "rtcIntersect1M")},
@@ -253,11 +307,19 @@ nlohmann::json to_json(const std::vector<Entry>& entries, const BenchOptions& o,
                            {"top_level_ms", or_null(r.top_level_ms)},
                            {"brefs", or_null(r.brefs)},
                            {"bytes", or_null(r.bytes)},
+                           {"inner_per_ray", or_null(e.per_ray(&TraversalCounts::inner_nodes))},
+                           {"leaves_per_ray", or_null(e.per_ray(&TraversalCounts::leaf_nodes))},
+                           {"lines_per_ray", or_null(e.per_ray(&TraversalCounts::cache_lines))},
+                           {"lines_per_ray_estimate", canopy ? nlohmann::json(nullptr) : or_null(embree_lines)},
                            {"image_mean", e.image_mean},
                            {"time_to_image_ms", {{"1", e.build_min() + frame},
                                                  {"16", e.build_min() + 16 * frame},
                                                  {"256", e.build_min() + 256 * frame}}}});
     }
+    return results;
+}
+
+nlohmann::json to_json(const nlohmann::json& results, const BenchOptions& o, uint64_t tris) {
     return {{"scene", o.scene}, {"tris", tris}, {"threads", o.threads}, {"width", o.width},
             {"height", o.height}, {"bounces", o.bounces}, {"stream_paths", o.stream_paths}, {"results", results}};
 }
@@ -288,6 +350,20 @@ void move_all(std::vector<Entry>& entries, const DynamicObject& object, uint32_t
     }
 }
 
+// The first timed frame again, untimed, one ray at a time through the counting kernel, once per canopy accelerator
+// (its stream rows trace the same rays through the same tree).
+void count_visits(std::vector<Entry>& entries, const std::vector<ShadingScene>& shading, const PinholeCamera& camera) {
+    for (size_t i = 0; i < entries.size(); ++i) {
+        Entry& e = entries[i];
+        if (e.accel->library() != "canopy") continue;
+        if (!builds_its_accelerator(entries, i)) {
+            e.visits = entries[i - 1].visits, e.counted_rays = entries[i - 1].counted_rays;
+            continue;
+        }
+        std::tie(e.visits, e.counted_rays) = e.accel->count_frame(shading[i], camera, 1);
+    }
+}
+
 // One untimed warm-up frame, then the timed frames, alternating between entries; with a dynamic object, it moves
 // before each timed frame (the warm-up shows it at rest, as built).
 void render_frames(std::vector<Entry>& entries, const Scene& scene, FlatScene& flat, const BenchOptions& o,
@@ -313,6 +389,7 @@ void render_frames(std::vector<Entry>& entries, const Scene& scene, FlatScene& f
         }
     }
     for (size_t i = 0; i < entries.size(); ++i) entries[i].image_mean = images[i].mean(o.frames);
+    if (!dynamic) count_visits(entries, shading, camera);
 }
 
 void write_json(const nlohmann::json& j, const std::string& path) {
@@ -380,7 +457,7 @@ nlohmann::json dynamic_json(const std::vector<Entry>& entries, const BenchOption
             {"results", results}};
 }
 
-void report_static(const std::vector<Entry>& entries, const BenchOptions& o, uint64_t tris) {
+void report_static(const std::vector<Entry>& entries, uint64_t tris) {
     print_table(entries, tris);
     for (const Entry& e : entries) {
         if (!e.accel->reason().empty()) std::printf("%s: %s\n", e.label().c_str(), e.accel->reason().c_str());
@@ -388,7 +465,13 @@ void report_static(const std::vector<Entry>& entries, const BenchOptions& o, uin
             std::printf("%s: object trees %.2f ms, top level %.3f ms (fastest of the builds) over %llu BRefs\n", e.label().c_str(),
                         *e.report.objects_ms, *e.report.top_level_ms, (unsigned long long)*e.report.brefs);
     }
-    write_json(to_json(entries, o, tris), o.json_path);
+}
+
+// "2" or "1, 2": the thread counts of the protocol line ("all" for 0).
+std::string thread_counts_text(const std::vector<int>& counts) {
+    std::string text;
+    for (int t : counts) text += (text.empty() ? "" : ", ") + (t ? std::to_string(t) : std::string("all"));
+    return text;
 }
 
 }  // namespace
@@ -416,22 +499,41 @@ void run_bench(const BenchOptions& o) {
                     100.0 * double(dynamic->triangles.size()) / double(tris), dynamic->path_radius, kFramesPerTurn);
         std::printf("protocol: %dx%d, %d bounces, 1 first build, then per frame a move, a timed rebuild and a timed "
                     "frame; %d frames (mean) after 1 warm-up at rest, threads %s\n",
-                    o.width, o.height, o.bounces, o.frames, o.threads ? std::to_string(o.threads).c_str() : "all");
+                    o.width, o.height, o.bounces, o.frames, thread_counts_text(o.threads).c_str());
     } else {
         std::printf("protocol: %dx%d, %d bounces, %d builds (min), %d frames (mean) after 1 warm-up, threads %s%s\n",
-                    o.width, o.height, o.bounces, o.builds, o.frames, o.threads ? std::to_string(o.threads).c_str() : "all",
+                    o.width, o.height, o.bounces, o.builds, o.frames, thread_counts_text(o.threads).c_str(),
                     std::count(o.tracers.begin(), o.tracers.end(), "stream")
                         ? ("; stream batches of " + std::to_string(o.stream_paths) + " paths").c_str() : "");
     }
 
     if (dynamic && o.tracers.size() > 1) throw std::invalid_argument("--dynamic takes one --tracer (its rows move their accelerator)");
-    std::vector<Entry> entries = make_entries(scene, flat, o);
-    build_all(entries, dynamic ? 1 : o.builds);
-    render_frames(entries, scene, flat, o, dynamic ? &*dynamic : nullptr);
-    for (Entry& e : entries) e.report = e.accel->report(o.epo && !dynamic);
-    if (!dynamic) return report_static(entries, o, tris);
-    print_dynamic_table(entries);
-    write_json(dynamic_json(entries, o, *dynamic, tris), o.json_path);
+    if (dynamic && o.threads.size() > 1) throw std::invalid_argument("--dynamic takes one --threads (its rows move the scene)");
+    if (dynamic) {
+        std::optional<tbb::global_control> limit;
+        if (o.threads[0] > 0) limit.emplace(tbb::global_control::max_allowed_parallelism, size_t(o.threads[0]));
+        std::vector<Entry> entries = make_entries(scene, flat, o, o.threads[0]);
+        build_all(entries, 1);
+        render_frames(entries, scene, flat, o, &*dynamic);
+        for (Entry& e : entries) e.report = e.accel->report(false);
+        print_dynamic_table(entries);
+        return write_json(dynamic_json(entries, o, *dynamic, tris), o.json_path);
+    }
+    // Each thread count is a whole protocol run of its own, with Embree on as many threads; its rows' ratios are
+    // against the Embree row of the same count.
+    nlohmann::json results = nlohmann::json::array();
+    for (const int threads : o.threads) {
+        std::optional<tbb::global_control> limit;
+        if (threads > 0) limit.emplace(tbb::global_control::max_allowed_parallelism, size_t(threads));
+        if (o.threads.size() > 1) std::printf("\n%s:", threads_text(threads).c_str());
+        std::vector<Entry> entries = make_entries(scene, flat, o, threads);
+        build_all(entries, o.builds);
+        render_frames(entries, scene, flat, o, nullptr);
+        for (Entry& e : entries) e.report = e.accel->report(o.epo);
+        report_static(entries, tris);
+        for (nlohmann::json& row : results_json(entries, tris)) results.push_back(std::move(row));
+    }
+    write_json(to_json(results, o, tris), o.json_path);
 }
 
 }  // namespace canopy

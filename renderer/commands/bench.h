@@ -24,7 +24,7 @@ struct BenchOptions {
     int builds = 20;
     int frames = 10;
     std::vector<int> frames_planned{16};  // `--builder auto` rows: one per value, each planning for that many frames
-    int threads = 0;
+    std::vector<int> threads{0};  // a whole run per count, each with its own table and rows (0: all threads)
     int width = 1024, height = 768;
     int bounces = 8;
     bool material_albedo = false;

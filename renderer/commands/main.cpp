@@ -107,7 +107,8 @@ int main(int argc, char** argv) {
     bench->add_option("--bounces", b.bounces, "Maximum bounces")->check(CLI::Range(0, 1024))->capture_default_str();
     bench->add_option("--json", b.json_path, "Write results as JSON");
     bench->add_flag("!--no-epo", b.epo, "Skip EPO in the report (minutes on millions of triangles)");
-    bench->add_option("--threads", threads, "Threads for every library (0: all)")->check(CLI::Range(0, 4096));
+    bench->add_option("--threads", b.threads, "Threads for every library (0: all); a list runs the whole bench once per count")
+        ->delimiter(',')->check(CLI::Range(0, 4096))->capture_default_str();
     bench->add_flag("--materials", b.material_albedo, "Use the materials: Kd or baseColorFactor as albedo, Ke or emissiveFactor as light");
     bench->add_option("--traversal", b.traversals, "Traversal modes: robust, fast")->delimiter(',')
         ->check(CLI::IsMember({"robust", "fast"}))->capture_default_str();
@@ -194,7 +195,6 @@ int main(int argc, char** argv) {
             st.width = study_size[0], st.height = study_size[1];
             run_study(st);
         } else {
-            b.threads = threads;
             b.width = bench_size[0], b.height = bench_size[1];
             if (!accels.empty()) b.embree_qualities = qualities;
             if (dynamic_option->count()) b.dynamic = dynamic;
