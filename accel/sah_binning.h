@@ -18,6 +18,7 @@ namespace canopy::sah_binning {
 
 constexpr uint32_t kMaxBins = 32;
 constexpr size_t kParallelGrain = 16 * 1024;
+constexpr size_t kTwoGridsFrom = 256;  // refs binned below which one grid's set-up and merge cost more than they save
 
 struct Box4 {
     __m128 lower, upper;
@@ -108,31 +109,50 @@ struct BinGrid {
     }
 };
 
-// Bins refs [begin, begin + count) by centroid on all three axes in one pass: the pass is memory bound.
+inline void add_to_bins(BinGrid& grid, const PrimRef& r, const BinMapping& mapping) {
+    alignas(16) int32_t b[4];
+    const __m256 ref = _mm256_load_ps(&r.lower.x);
+    const __m128 c2 = _mm_add_ps(_mm256_castps256_ps128(ref), _mm256_extractf128_ps(ref, 1));
+    _mm_store_si128(reinterpret_cast<__m128i*>(b), mapping.bin3(c2));
+    const Box8 box = Box8::of(ref);
+    for (int a = 0; a < 3; ++a) {
+        grid.boxes[a][b[a]].extend(box);
+        ++grid.counts[a][b[a]];
+    }
+}
+
+inline void merge_bins(BinGrid& x, const BinGrid& y, uint32_t n) {
+    for (int a = 0; a < 3; ++a) {
+        for (uint32_t i = 0; i < n; ++i) {
+            x.boxes[a][i].extend(y.boxes[a][i]);
+            x.counts[a][i] += y.counts[a][i];
+        }
+    }
+}
+
+// Bins refs [begin, begin + count) by centroid on all three axes in one pass: the pass is memory bound. Even and
+// odd refs go to two grids, merged at the end: neighbouring refs often share a bin, and with one grid each would
+// wait for the previous one's store to that bin to be forwarded.
 inline BinGrid bin_refs(const PrimRef* refs, uint32_t begin, uint32_t count, const BinMapping& mapping) {
     const uint32_t n = mapping.bins;
     auto bin_chunk = [&](size_t first, size_t end) {
-        BinGrid grid(n);
-        alignas(16) int32_t b[4];
-        for (size_t i = begin + first; i < begin + end; ++i) {
-            const __m256 ref = _mm256_load_ps(&refs[i].lower.x);
-            const __m128 c2 = _mm_add_ps(_mm256_castps256_ps128(ref), _mm256_extractf128_ps(ref, 1));
-            _mm_store_si128(reinterpret_cast<__m128i*>(b), mapping.bin3(c2));
-            const Box8 box = Box8::of(ref);
-            for (int a = 0; a < 3; ++a) {
-                grid.boxes[a][b[a]].extend(box);
-                ++grid.counts[a][b[a]];
-            }
+        BinGrid even(n);
+        if (end - first < kTwoGridsFrom) {
+            for (size_t i = begin + first; i < begin + end; ++i) add_to_bins(even, refs[i], mapping);
+            return even;
         }
-        return grid;
+        BinGrid odd(n);
+        size_t i = begin + first;
+        for (; i + 1 < begin + end; i += 2) {
+            add_to_bins(even, refs[i], mapping);
+            add_to_bins(odd, refs[i + 1], mapping);
+        }
+        if (i < begin + end) add_to_bins(even, refs[i], mapping);
+        merge_bins(even, odd, n);
+        return even;
     };
     auto join = [n](BinGrid x, const BinGrid& y) {
-        for (int a = 0; a < 3; ++a) {
-            for (uint32_t i = 0; i < n; ++i) {
-                x.boxes[a][i].extend(y.boxes[a][i]);
-                x.counts[a][i] += y.counts[a][i];
-            }
-        }
+        merge_bins(x, y, n);
         return x;
     };
     return parallel::reduce_lazy(count, kParallelGrain, [n] { return BinGrid(n); }, bin_chunk, join);
