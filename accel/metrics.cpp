@@ -117,8 +117,7 @@ private:
         return ranges;
     }
     BBox child_box(uint32_t node, int i) const {
-        const WideNode<N>& n = bvh_.nodes[node];
-        return {Vec3(n.lower(0, i), n.lower(1, i), n.lower(2, i)), Vec3(n.upper(0, i), n.upper(1, i), n.upper(2, i))};
+        return bvh_.frame.box(bvh_.nodes[node], i);
     }
     RefRange fill(uint32_t index) {
         RefRange range{~0u, 0};

@@ -65,18 +65,15 @@ using Clock = std::chrono::steady_clock;
 
 double ms_since(Clock::time_point start) { return std::chrono::duration<double, std::milli>(Clock::now() - start).count(); }
 
+// An identity placement of an object whose planes are in a frame of its own (not at the world origin, see
+// build_two_level) is entered as a transformed one, so that its ray is translated into that frame.
 PlacedObject place(const TwoLevelInstance& instance, const ObjectTree& object) {
-    PlacedObject placed{instance.object, instance.prim_offset - object.prim_base, instance.to_world == glm::mat4(1.0f)};
+    const bool identity = instance.to_world == glm::mat4(1.0f) && object.frame.origin == Vec3(0.0f);
+    PlacedObject placed{instance.object, instance.prim_offset - object.prim_base, identity};
     const glm::dmat4 inverse = glm::inverse(glm::dmat4(instance.to_world));
     for (int row = 0; row < 3; ++row)
         for (int col = 0; col < 4; ++col) placed.world_to_object[row][col] = float(inverse[col][row]);
     return placed;
-}
-
-BBox child_box(const auto& node, int c) {
-    BBox box;
-    for (int a = 0; a < 3; ++a) box.lower[a] = node.lower(a, c), box.upper[a] = node.upper(a, c);
-    return box;
 }
 
 // A BVH node build reference (sec. 3.2): a node of an instance's object tree, its world bounds, and the
@@ -216,12 +213,14 @@ private:
         r.bounds = BBox{};
         for (int c = 0; c < N; ++c) {
             if (node.is_empty(c)) continue;
-            const BBox world = placed_box(instance, child_box(node, c));
+            const BBox world = placed_box(instance, object_frame(instance).box(node, c));
             grow(r.bounds, world);
             r.children_area += world.half_area();
         }
         return r;
     }
+
+    const PlaneFrame& object_frame(uint32_t instance) const { return bvh_.objects[instances_[instance].object].frame; }
 
     // An object-space box in world space, conservatively.
     BBox placed_box(uint32_t instance, const BBox& box) const {
@@ -303,7 +302,7 @@ private:
         for (int c = 0; c < N; ++c) {
             if (node.is_empty(c)) continue;
             // The first child takes the parent's slot.
-            brefs_[first ? i : end++] = placed_ref(instance, node.child[c], node.count[c], child_box(node, c),
+            brefs_[first ? i : end++] = placed_ref(instance, node.child[c], node.count[c], object_frame(instance).box(node, c),
                                                    estimated_prims(node, c, prims));
             first = false;
         }
@@ -612,9 +611,11 @@ void build_top_level(TwoLevelBvh<N>& bvh, const std::vector<TwoLevelInstance>& i
     TopLevelBuilder<N> builder(bvh, instances, settings);
     const Bvh top = builder.build();
     bvh.bounds = top.nodes[0].bounds;
+    // At the world origin: the frame of the object trees the world ray reaches directly (build_two_level).
+    bvh.pool.frame = PlaneFrame::at(Vec3(0.0f), bvh.bounds);
     WideNodes<N> nodes;
     uint32_t entries = 0;
-    const std::vector<LeafRun> runs = collapse_nodes<N>(top, nodes, &one_entry_per_leaf, entries);
+    const std::vector<LeafRun> runs = collapse_nodes<N>(top, nodes, bvh.pool.frame, &one_entry_per_leaf, entries);
     pool_top_level(bvh, nodes, runs, builder.brefs());
 }
 
@@ -624,6 +625,9 @@ TwoLevelBvh<N> build_two_level(const TwoLevelInput& input, const TwoLevelSetting
     const BuilderEntry& builder = find_builder(settings.blas_builder);
     const auto start = Clock::now();
     const std::vector<uint32_t> bases = prim_bases(input);
+    std::vector<bool> identity_placed(input.objects.size(), false);
+    for (const TwoLevelInstance& instance : input.instances)
+        if (instance.to_world == glm::mat4(1.0f)) identity_placed[instance.object] = true;
     bvh.objects.resize(input.objects.size());
     std::vector<WideBvh<N>> trees(input.objects.size());
     parallel::for_each(input.objects.size(), 1, [&](size_t i) {
@@ -632,8 +636,12 @@ TwoLevelBvh<N> build_two_level(const TwoLevelInput& input, const TwoLevelSetting
         bvh.objects[i].prim_base = bases[i];
         if (triangles.empty()) return;
         const Bvh object = builder.build(BuildInput{triangles, make_prim_refs(triangles)}, settings.blas);
-        trees[i] = collapse<N>(object, triangles, settings.collapse);
+        // An object placed as it is shares the world ray with the top level, whose frame is at the world origin;
+        // any other gets a frame at its centre, which the ray entering it is translated to.
+        trees[i] = collapse<N>(object, triangles, settings.collapse,
+                               identity_placed[i] ? std::optional<Vec3>(Vec3(0.0f)) : std::nullopt);
         bvh.objects[i].bounds = trees[i].bounds;
+        bvh.objects[i].frame = trees[i].frame;
     });
     // A wide top level over at most one BRef per capacity slot has fewer nodes than slots (or one node).
     pool_object_trees(bvh, trees, bref_capacity(bvh.objects, input.instances, settings));
@@ -665,7 +673,7 @@ double entry_cost(const TwoLevelBvh<N>& bvh, const TopLevelRef& entry, const BBo
     double sum = costs.inner * box.half_area();
     for (int c = 0; c < N; ++c) {
         if (node.is_empty(c)) continue;
-        const BBox local = child_box(node, c);
+        const BBox local = bvh.objects[bvh.instances[entry.instance].object].frame.box(node, c);
         const BBox world = bvh.instances[entry.instance].identity ? local : transform_bounds(bvh.to_world[entry.instance], local);
         sum += entry_cost(bvh, {entry.instance, node.child[c], node.count[c]}, world, costs);
     }
@@ -680,7 +688,7 @@ double world_cost(const TwoLevelBvh<N>& bvh, uint32_t index, const BBox& box, Sa
     double sum = costs.inner * box.half_area();
     for (int c = 0; c < N; ++c) {
         if (node.is_empty(c)) continue;
-        const BBox child = child_box(node, c);
+        const BBox child = bvh.pool.frame.box(node, c);
         if (!node.is_leaf(c)) {
             sum += world_cost(bvh, node.child[c], child, costs);
         } else if (node.count[c] & TwoLevelBvh<N>::kInstanceEntries) {

@@ -70,6 +70,7 @@ struct ObjectTree {
     uint32_t triangles = 0;
     uint32_t prim_base = 0;  // added to the object's triangle ids in its leaves: its first identity placement's offset
     BBox bounds;             // in object space
+    PlaneFrame frame;        // its planes': at the world origin when placed as it is anywhere, else at its centre
 };
 
 // A top-level leaf entry: a node (count 0) or leaf (count > 0) of an instance's object tree, as WideNode names
@@ -88,7 +89,7 @@ template <int N>
 struct TwoLevelBvh {
     static constexpr int kWidth = N;
     static constexpr uint32_t kInstanceEntries = 0x80000000u;
-    WideBvh<N> pool;
+    WideBvh<N> pool;  // pool.frame, at the world origin: the top level's and the directly reached object trees'.
     uint32_t root = 0;          // the top level's root in pool.nodes
     uint32_t object_nodes = 0;  // pool.nodes before this index are object trees'
     uint32_t object_leaves = 0;  // pool.leaves likewise; after them, the top level's leaves of opened triangles

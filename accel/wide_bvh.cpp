@@ -230,10 +230,10 @@ class Collapser {
     };
 
 public:
-    Collapser(const Bvh& bvh, WideNodes<N>& nodes, uint32_t (*entries)(int, uint32_t), LeafSink& sink,
-              CollapseMethod method)
+    Collapser(const Bvh& bvh, WideNodes<N>& nodes, const PlaneFrame& frame, uint32_t (*entries)(int, uint32_t),
+              LeafSink& sink, CollapseMethod method)
         : bvh_(bvh), plan_(bvh, method == CollapseMethod::Optimal && N > 2, kMerges, kLanes), nodes_(nodes),
-          entries_(entries), sink_(sink),
+          frame_(frame), entries_(entries), sink_(sink),
           top_depth_(bvh.nodes.size() < kParallelNodes ? 0 : kTopDepth),
           top_extents_(slot_of(top_depth_ + 1, 0)), top_merged_(top_extents_.size()),
           subtrees_(slot_of(top_depth_ + 1, 0) - slot_of(top_depth_, 0)) {}
@@ -457,13 +457,13 @@ private:
         Refs shared_refs;                              // their refs: the block is written when full or at the end
         for (int i = 0; i < N; ++i) {
             if (i >= children.count) {
-                set_box(node, i, BBox{});  // lower = +inf, upper = -inf: never hit
+                frame_.set_box(node, i, BBox{});  // lower = +inf, upper = -inf: never hit
                 node.child[i] = WideNode<N>::kEmpty;
                 node.count[i] = 0;
                 continue;
             }
             const BvhNode& c = bvh_.nodes[children.node[i]];
-            set_box(node, i, c.bounds);
+            frame_.set_box(node, i, c.bounds);
             node.count[i] = c.count;
             if (children.merged >> i & 1) {
                 if constexpr (kMerges) {
@@ -497,16 +497,10 @@ private:
 
     static bool shares_block(const BvhNode& c) { return LeafSink::kSharesBlocks && c.count == 1; }
 
-    static void set_box(WideNode<N>& node, int i, const BBox& box) {
-        for (int a = 0; a < 3; ++a) {
-            node.lower(a, i) = box.lower[a];
-            node.upper(a, i) = box.upper[a];
-        }
-    }
-
     const Bvh& bvh_;
     const CollapsePlan<N> plan_;  // enabled for the optimal method at widths above 2 (at 2 both methods agree)
     WideNodes<N>& nodes_;
+    const PlaneFrame frame_;
     uint32_t (*entries_)(int, uint32_t);
     LeafSink& sink_;
     const uint32_t top_depth_;
@@ -603,28 +597,30 @@ CollapseMethod parse_collapse_method(const std::string& name) {
 }
 
 template <int N>
-std::vector<LeafRun> collapse_nodes(const Bvh& bvh, WideNodes<N>& nodes, uint32_t (*entries)(int, uint32_t),
-                                    uint32_t& total_entries) {
+std::vector<LeafRun> collapse_nodes(const Bvh& bvh, WideNodes<N>& nodes, const PlaneFrame& frame,
+                                    uint32_t (*entries)(int, uint32_t), uint32_t& total_entries) {
     RunList list;
-    total_entries = Collapser<N, RunList>(bvh, nodes, entries, list, CollapseMethod::Greedy).run().entries;
+    total_entries = Collapser<N, RunList>(bvh, nodes, frame, entries, list, CollapseMethod::Greedy).run().entries;
     return std::move(list.runs);
 }
 
 template <int N>
-WideBvh<N> collapse(const Bvh& bvh, std::span<const Triangle> triangles, CollapseMethod method) {
+WideBvh<N> collapse(const Bvh& bvh, std::span<const Triangle> triangles, CollapseMethod method,
+                    std::optional<Vec3> origin) {
     WideBvh<N> out;
     if (bvh.nodes.empty()) return out;
     out.bounds = bvh.nodes[0].bounds;
+    out.frame = origin ? PlaneFrame::at(*origin, out.bounds) : PlaneFrame::centred(out.bounds);
     TriangleLeaves<N> leaves{out, bvh, triangles};
-    Collapser<N, TriangleLeaves<N>>(bvh, out.nodes, &leaf_entries, leaves, method).run();
+    Collapser<N, TriangleLeaves<N>>(bvh, out.nodes, out.frame, &leaf_entries, leaves, method).run();
     return out;
 }
 
-template std::vector<LeafRun> collapse_nodes<2>(const Bvh&, WideNodes<2>&, uint32_t (*)(int, uint32_t), uint32_t&);
-template std::vector<LeafRun> collapse_nodes<4>(const Bvh&, WideNodes<4>&, uint32_t (*)(int, uint32_t), uint32_t&);
-template std::vector<LeafRun> collapse_nodes<8>(const Bvh&, WideNodes<8>&, uint32_t (*)(int, uint32_t), uint32_t&);
-template WideBvh<2> collapse<2>(const Bvh&, std::span<const Triangle>, CollapseMethod);
-template WideBvh<4> collapse<4>(const Bvh&, std::span<const Triangle>, CollapseMethod);
-template WideBvh<8> collapse<8>(const Bvh&, std::span<const Triangle>, CollapseMethod);
+template std::vector<LeafRun> collapse_nodes<2>(const Bvh&, WideNodes<2>&, const PlaneFrame&, uint32_t (*)(int, uint32_t), uint32_t&);
+template std::vector<LeafRun> collapse_nodes<4>(const Bvh&, WideNodes<4>&, const PlaneFrame&, uint32_t (*)(int, uint32_t), uint32_t&);
+template std::vector<LeafRun> collapse_nodes<8>(const Bvh&, WideNodes<8>&, const PlaneFrame&, uint32_t (*)(int, uint32_t), uint32_t&);
+template WideBvh<2> collapse<2>(const Bvh&, std::span<const Triangle>, CollapseMethod, std::optional<Vec3>);
+template WideBvh<4> collapse<4>(const Bvh&, std::span<const Triangle>, CollapseMethod, std::optional<Vec3>);
+template WideBvh<8> collapse<8>(const Bvh&, std::span<const Triangle>, CollapseMethod, std::optional<Vec3>);
 
 }  // namespace canopy

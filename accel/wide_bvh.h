@@ -5,6 +5,10 @@
 #include "accel/bvh.h"
 #include "accel/huge_page_allocator.h"
 
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <optional>
 #include <span>
 #include <string>
 #include <type_traits>
@@ -29,6 +33,65 @@ struct alignas(64) WideNode {
     bool is_empty(int i) const { return child[i] == kEmpty; }
 };
 static_assert(sizeof(WideNode<2>) == 64 && sizeof(WideNode<4>) == 128 && sizeof(WideNode<8>) == 256);
+
+// x - origin rounded towards -inf (upwards = false) or +inf: the float difference corrected by its exact rounding
+// error (Knuth's TwoSum). Infinities, an empty slot's planes, stay infinite.
+inline float difference_rounded(float x, float origin, bool upwards) {
+    const float s = x - origin;
+    if (!std::isfinite(s)) return s;
+    const float back = s - x;
+    const float error = (x - (s - back)) + (-origin - back);
+    if (upwards ? error > 0.0f : error < 0.0f)
+        return std::nextafter(s, upwards ? std::numeric_limits<float>::infinity() : -std::numeric_limits<float>::infinity());
+    return s;
+}
+
+// The coordinates a tree's planes are stored in: relative to `origin`, a point near the tree's geometry, rounded
+// outwards, so that robust traversal's padding, which grows with the magnitude of the coordinates in the slab test
+// (see SlabRay, kernels/traverse.h), grows with the tree's extent, not its distance from the coordinate origin.
+// The kernels translate the ray's origin, never its distances; the triangle tests keep world coordinates.
+// `bound` bounds the magnitude of every plane stored in this frame. Planes are read and written only here.
+struct PlaneFrame {
+    Vec3 origin{0.0f};
+    float bound = 0.0f;
+
+    // The frame at `origin` for boxes inside `box`.
+    static PlaneFrame at(const Vec3& origin, const BBox& box) {
+        PlaneFrame frame{origin, 0.0f};
+        if (box.empty()) return frame;
+        const BBox relative = frame.relative(box);
+        for (int a = 0; a < 3; ++a)
+            frame.bound = std::max({frame.bound, std::abs(relative.lower[a]), std::abs(relative.upper[a])});
+        return frame;
+    }
+    // The frame at the centre of `box`.
+    static PlaneFrame centred(const BBox& box) {
+        return at(box.empty() ? Vec3(0.0f) : 0.5f * box.lower + 0.5f * box.upper, box);
+    }
+
+    // `box` in this frame, rounded outwards: it contains the exact translated box.
+    BBox relative(const BBox& box) const {
+        BBox out;
+        for (int a = 0; a < 3; ++a) {
+            out.lower[a] = difference_rounded(box.lower[a], origin[a], false);
+            out.upper[a] = difference_rounded(box.upper[a], origin[a], true);
+        }
+        return out;
+    }
+    template <int N>
+    void set_box(WideNode<N>& node, int i, const BBox& box) const {
+        const BBox r = relative(box);
+        for (int a = 0; a < 3; ++a) node.lower(a, i) = r.lower[a], node.upper(a, i) = r.upper[a];
+    }
+    // Child i's box in world coordinates; it contains the box set_box was given (rounding to nearest keeps the
+    // order of the exact sums, which lie outside that box).
+    template <int N>
+    BBox box(const WideNode<N>& node, int i) const {
+        BBox out;
+        for (int a = 0; a < 3; ++a) out.lower[a] = origin[a] + node.lower(a, i), out.upper[a] = origin[a] + node.upper(a, i);
+        return out;
+    }
+};
 
 // A triangle as the intersector wants it, with the id of the scene triangle it came from.
 struct LeafTriangle {
@@ -84,6 +147,7 @@ struct WideBvh {
     WideNodes<N> nodes;  // nodes[0] is the root, never a leaf
     std::vector<Leaf, HugePageAllocator<Leaf>> leaves;
     BBox bounds;
+    PlaneFrame frame;  // the nodes' planes are stored in it
 
     uint64_t bytes() const { return nodes.size() * sizeof(WideNode<N>) + leaves.size() * sizeof(Leaf); }
 };
@@ -103,9 +167,11 @@ enum class CollapseMethod {
 // "optimal" or "greedy"; otherwise throws std::invalid_argument naming the known methods.
 CollapseMethod parse_collapse_method(const std::string& name);
 
-// The wide tree of a binary one. A root that is a leaf becomes a node with one leaf child.
+// The wide tree of a binary one. A root that is a leaf becomes a node with one leaf child. Its planes are stored
+// relative to `origin`, by default the centre of its box.
 template <int N>
-WideBvh<N> collapse(const Bvh& bvh, std::span<const Triangle> triangles, CollapseMethod method = CollapseMethod::Optimal);
+WideBvh<N> collapse(const Bvh& bvh, std::span<const Triangle> triangles, CollapseMethod method = CollapseMethod::Optimal,
+                    std::optional<Vec3> origin = {});
 
 // A leaf of a wide tree: its first entry in the tree's leaf array, and the binary leaf's refs it is made of.
 struct LeafRun {
@@ -113,11 +179,11 @@ struct LeafRun {
 };
 
 // The node half of collapse, for trees whose leaves hold something else than triangles (the two-level top
-// level), by the greedy method (the optimal one's costs are those of triangle blocks): writes `nodes`; a binary
-// leaf of n refs takes entries(N, n) leaf entries, `total_entries` in all.
+// level), by the greedy method (the optimal one's costs are those of triangle blocks): writes `nodes`, their
+// planes in `frame`; a binary leaf of n refs takes entries(N, n) leaf entries, `total_entries` in all.
 // Returns the leaves in emission order, for the caller to fill.
 template <int N>
-std::vector<LeafRun> collapse_nodes(const Bvh& bvh, WideNodes<N>& nodes, uint32_t (*entries)(int, uint32_t),
-                                    uint32_t& total_entries);
+std::vector<LeafRun> collapse_nodes(const Bvh& bvh, WideNodes<N>& nodes, const PlaneFrame& frame,
+                                    uint32_t (*entries)(int, uint32_t), uint32_t& total_entries);
 
 }  // namespace canopy

@@ -20,20 +20,6 @@
 
 namespace canopy {
 
-// A bound on the magnitude of every plane coordinate of a tree, from a box holding all of its boxes (a tree's
-// root box: every builder's boxes nest, which the builder tests check). In SSE lanes, since every ray computes it
-// (glm::abs compiled to a compare and a blend per coordinate).
-[[gnu::always_inline]] inline float plane_bound(const BBox& bounds) {
-    static_assert(sizeof(BBox) == 6 * sizeof(float));
-    const float* coordinates = &bounds.lower.x;  // lower x, y, z, upper x, y, z
-    const __m128 sign = _mm_set1_ps(-0.0f);
-    const __m128 first = _mm_andnot_ps(sign, _mm_loadu_ps(coordinates));     // lower x, y, z, upper x
-    const __m128 last = _mm_andnot_ps(sign, _mm_loadu_ps(coordinates + 2));  // lower z, upper x, y, z
-    const __m128 m = _mm_max_ps(first, last);
-    const __m128 m2 = _mm_max_ps(m, _mm_movehl_ps(m, m));
-    return _mm_cvtss_f32(_mm_max_ss(m2, _mm_movehdup_ps(m2)));
-}
-
 // Robust mode's padding of the slab distances, relative to R |inv_dir| (see SlabRay): 8 u, u = 2^-24, twice the
 // rounding bound it covers. 16 u traced the accuracy sphere at offset 1e7 in 546 ns a ray, 8 u in 257.
 constexpr float kRobustPad = 0x1p-21f;
@@ -80,15 +66,20 @@ namespace detail {
 // with `add` = -org * inv_dir; the near and far planes of each axis are reached by offsets into
 // WideNode::planes chosen once by the direction's sign.
 //
+// Planes and origin are in the tree's PlaneFrame: the origin is translated once, org - frame.origin, so R below
+// measures the tree's extent, not its distance from the coordinate origin, and a small scene far out (the
+// accuracy sphere, radius 100, at offset 1e7) traces as fast as at the origin. Distances stay world distances.
+//
 // Robust mode (Ize 2013's guarantee, "Robust BVH Ray Traversal", by other means) lowers the near planes' addend
 // and raises the far planes' by pad = kRobustPad R |inv_dir|, R = P + |org| with P and |org| the largest
-// magnitudes of the tree's plane coordinates and of the origin's. Against the exact
+// magnitudes of the tree's plane coordinates (frame.bound) and of the translated origin's. Against the exact
 // (plane - org) / dir, the FMA form rounds 1/dir, org * inv_dir, the addend and the FMA itself: errors of u times
-// (|plane| + |org|), |org|, |org| + pad and |plane| + |org| + pad, times |inv_dir|, under 4 u R |inv_dir| in all
-// (first order), less than pad, so a box the ray touches is never culled, at any coordinates. Ize's relative
-// padding needs the difference plane - org, a subtraction and a multiplication per slab: this costs one FMA, as
-// the fast mode does. The price: boxes widen by 8 u R in world units, a few float spacings of the scene's
-// coordinates, which slows scenes whose detail is that small, far from the coordinate origin (README, accuracy).
+// (|plane| + |org|), |org|, |org| + pad and |plane| + |org| + pad, times |inv_dir|; the translation adds u |org|
+// |inv_dir| (a rounded difference), and the planes, rounded outwards, only grow the boxes: under 5 u R |inv_dir|
+// in all (first order), less than pad, so a box the ray touches is never culled, at any coordinates. Ize's
+// relative padding needs the difference plane - org, a subtraction and a multiplication per slab: this costs one
+// FMA, as the fast mode does. The price: boxes widen by 8 u R in world units, a few float spacings of the
+// tree's extent.
 // A component under kMinSlabDir (a zero, say) is taken as kMinSlabDir: that only shrinks the axis's distances,
 // which lowers near ones (conservative), and its far distances stay above pad >= 2^-21 2^64 R, past every point
 // of the scene (within R of the origin on every axis) for a ray whose largest component exceeds 2^-40. An axis
@@ -102,10 +93,11 @@ struct SlabRay {
 
     SlabRay() = default;  // for arrays of rays set up later (stream traversal)
     // In SSE lanes x, y, z: one division for the three reciprocals, no branches.
-    [[gnu::always_inline]] SlabRay(const Ray& ray, float plane_bound, bool robust) {
+    [[gnu::always_inline]] SlabRay(const Ray& ray, const PlaneFrame& frame, bool robust) {
         const __m128 sign = _mm_set1_ps(-0.0f);
         const __m128 dir = _mm_setr_ps(ray.dir.x, ray.dir.y, ray.dir.z, 1.0f);
-        const __m128 org = _mm_setr_ps(ray.org.x, ray.org.y, ray.org.z, 0.0f);
+        const __m128 org = _mm_sub_ps(_mm_setr_ps(ray.org.x, ray.org.y, ray.org.z, 0.0f),
+                                      _mm_setr_ps(frame.origin.x, frame.origin.y, frame.origin.z, 0.0f));
         // |dir| raised to kMinSlabDir with dir's sign; a NaN stays NaN (max returns its second operand then).
         const __m128 magnitude = _mm_max_ps(_mm_set1_ps(kMinSlabDir), _mm_andnot_ps(sign, dir));
         const __m128 safe_dir = _mm_or_ps(magnitude, _mm_and_ps(sign, dir));
@@ -116,7 +108,7 @@ struct SlabRay {
             const __m128 abs_org = _mm_andnot_ps(sign, org);
             const __m128 yz = _mm_max_ps(_mm_movehdup_ps(abs_org), _mm_movehl_ps(abs_org, abs_org));
             const __m128 org_max = _mm_max_ps(abs_org, yz);  // lane 0: the largest |org| component
-            const __m128 r = _mm_add_ps(_mm_set1_ps(plane_bound), _mm_broadcastss_ps(org_max));
+            const __m128 r = _mm_add_ps(_mm_set1_ps(frame.bound), _mm_broadcastss_ps(org_max));
             const __m128 reach = _mm_mul_ps(_mm_set1_ps(kRobustPad), r);
             pad = _mm_mul_ps(reach, _mm_andnot_ps(sign, inv));
         }
@@ -355,7 +347,7 @@ template <Query Q, bool Robust = true, class TriangleTest = WatertightRay, int N
     hit = Hit{};
     hit.t = ray.tmax;
     if (bvh.nodes.empty()) return false;
-    const detail::SlabRay<N> box_ray(ray, plane_bound(bvh.bounds), Robust);
+    const detail::SlabRay<N> box_ray(ray, bvh.frame, Robust);
     const float tmin = kernel_tmin(ray);
     // The triangle test is set up at once for a ray that starts inside the scene's box, since such a ray nearly
     // always reaches a leaf and the setup then overlaps the first nodes' work; else at the first leaf, since many

@@ -85,7 +85,7 @@ struct PacketRays {
     std::conditional_t<kPacketLeaves, WatertightPacket, NoPacketTest> packet_test;
 
     // `rays` share their direction octant.
-    PacketRays(const Ray* rays, uint32_t count, float plane_bound, bool robust)
+    PacketRays(const Ray* rays, uint32_t count, const PlaneFrame& frame, bool robust)
         : packet_test(set_up_tests(rays, count), count) {
         alignas(sizeof(L::F)) float lanes[6][kPacketRays] = {};
         for (uint32_t r = 0; r < count; ++r) {
@@ -94,13 +94,13 @@ struct PacketRays {
             tfar[r] = rays[r].tmax;
         }
         for (uint32_t r = count; r < kPacketRays; ++r) tmins[r] = tfar[r] = 0.0f;
-        set_up_slabs(lanes, plane_bound, robust);
-        const SlabRay<N> first(rays[0], plane_bound, robust);
+        set_up_slabs(lanes, frame, robust);
+        const SlabRay<N> first(rays[0], frame, robust);
         for (int a = 0; a < 3; ++a) near[a] = first.near[a], far[a] = first.far[a];
         tmin = L::load(tmins);
     }
 
-    // Lane r's SlabRay, as SlabRay(ray, plane_bound, robust) computes it, for the single-ray kernel.
+    // Lane r's SlabRay, as SlabRay(ray, frame, robust) computes it, for the single-ray kernel.
     SlabRay<N> lane_slab(int r) const {
         SlabRay<N> slab;
         for (int a = 0; a < 3; ++a) {
@@ -114,12 +114,15 @@ struct PacketRays {
 
 private:
     // SlabRay's arithmetic (traverse.h), operation for operation, on every lane at once.
-    void set_up_slabs(const float (&lanes)[6][kPacketRays], float plane_bound, bool robust) {
+    void set_up_slabs(const float (&lanes)[6][kPacketRays], const PlaneFrame& frame, bool robust) {
         const L::F sign = L::set1(-0.0f), largest = L::set1(std::numeric_limits<float>::max());
         const L::F infinity = L::set1(std::numeric_limits<float>::infinity());
         L::F org[3], abs_org[3];
-        for (int a = 0; a < 3; ++a) org[a] = L::load(lanes[a]), abs_org[a] = L::and_not(sign, org[a]);
-        const L::F reach = L::mul(L::set1(kRobustPad), L::add(L::set1(plane_bound), L::max(abs_org[0], L::max(abs_org[1], abs_org[2]))));
+        for (int a = 0; a < 3; ++a) {
+            org[a] = L::sub(L::load(lanes[a]), L::set1(frame.origin[a]));
+            abs_org[a] = L::and_not(sign, org[a]);
+        }
+        const L::F reach = L::mul(L::set1(kRobustPad), L::add(L::set1(frame.bound), L::max(abs_org[0], L::max(abs_org[1], abs_org[2]))));
         for (int a = 0; a < 3; ++a) {
             const L::F dir = L::load(lanes[3 + a]);
             const L::F magnitude = L::max(L::set1(kMinSlabDir), L::and_not(sign, dir));
@@ -217,13 +220,12 @@ template <int N, class TriangleTest>
 }
 
 template <Query Q, class TriangleTest, int N, class Counter>
-void trace_packet(const WideBvh<N>& bvh, const Ray* rays, Hit* hits, uint32_t count, float plane_bound, bool robust,
-                  Counter& counter) {
+void trace_packet(const WideBvh<N>& bvh, const Ray* rays, Hit* hits, uint32_t count, bool robust, Counter& counter) {
     for (uint32_t r = 0; r < count; ++r) {
         hits[r] = Hit{};
         hits[r].t = rays[r].tmax;
     }
-    PacketRays<N, TriangleTest> p(rays, count, plane_bound, robust);
+    PacketRays<N, TriangleTest> p(rays, count, bvh.frame, robust);
     uint32_t done = 0;  // any hit: lanes that have one
     const auto record_hit = [&](int r) {  // after lane r recorded a hit
         p.tfar[r] = hits[r].t;
@@ -275,12 +277,11 @@ void traverse_packets(const WideBvh<N>& bvh, std::span<const Ray> rays, std::spa
     } else {
 #if defined(__AVX2__) && defined(__FMA__)
         if (bvh.nodes.empty()) return detail::trace_each<Q, Robust, TriangleTest>(bvh, rays, hits, counter);
-        const float bound = plane_bound(bvh.bounds);
         size_t first = 0;
         for (size_t i = 1; i <= rays.size(); ++i) {
             if (i == rays.size() || i - first == size_t(detail::kPacketRays) || detail::octant(rays[i]) != detail::octant(rays[first])) {
-                detail::trace_packet<Q, TriangleTest>(bvh, rays.data() + first, hits.data() + first, uint32_t(i - first), bound,
-                                                      Robust, counter);
+                detail::trace_packet<Q, TriangleTest>(bvh, rays.data() + first, hits.data() + first, uint32_t(i - first), Robust,
+                                                      counter);
                 first = i;
             }
         }

@@ -123,12 +123,11 @@ template <Query Q, bool Robust, class TriangleTest, int N, class Counter>
 void trace_chunk(const WideBvh<N>& bvh, std::span<const Ray> rays, std::span<Hit> hits, StreamScratch<N>& s,
                  Counter& counter) {
     const uint32_t n = uint32_t(rays.size());
-    const float bound = plane_bound(bvh.bounds);
     s.slabs.resize(n);
     s.tmin.resize(n);
     s.lists.resize(n);
     for (uint32_t i = 0; i < n; ++i) {
-        s.slabs[i] = SlabRay<N>(rays[i], bound, Robust);
+        s.slabs[i] = SlabRay<N>(rays[i], bvh.frame, Robust);
         s.tmin[i] = kernel_tmin(rays[i]);
         s.lists[i] = {i, s.tmin[i]};
     }

@@ -45,7 +45,7 @@ template <Query Q, bool Robust, class TriangleTest, int N, class Counter, class 
             // reach a leaf; frames 3% faster).
             const Ray local{instance.point(ray.org), instance.vector(ray.dir), tmin, hit.t};
             LazyTest<TriangleTest> local_tri;
-            const SlabRay<N> local_box(local, plane_bound(bvh.objects[instance.object].bounds), Robust);
+            const SlabRay<N> local_box(local, bvh.objects[instance.object].frame, Robust);
             here = enter_object<Q>(bvh.pool, entry, local_box, [&]() -> const TriangleTest& { return local_tri.get(local); },
                                    tmin, hit, counter);
         }
@@ -64,7 +64,7 @@ template <Query Q, bool Robust = true, class TriangleTest = WatertightRay, int N
     hit = Hit{};
     hit.t = ray.tmax;
     if (bvh.brefs == 0) return false;
-    const detail::SlabRay<N> world_box(ray, plane_bound(bvh.bounds), Robust);
+    const detail::SlabRay<N> world_box(ray, bvh.pool.frame, Robust);
     detail::LazyTest<TriangleTest> world_test;  // set up at the first leaf the world ray reaches, as in the flat kernel
     const auto world_tri = [&]() -> const TriangleTest& { return world_test.get(ray); };
     const float tmin = kernel_tmin(ray);

@@ -78,17 +78,18 @@ bool touches(const Ray& ray, const BBox& box) {
     return t0 <= t1;
 }
 
-// The node test of width N on a node whose first child is `box` and whose other children are empty.
+// The node test of width N on a node whose first child is `box` and whose other children are empty, its planes
+// in a frame at the box's centre, as collapse() stores a tree's.
 template <int N>
 bool node_test_hits(const BBox& box, const Ray& ray, bool robust) {
+    const PlaneFrame frame = PlaneFrame::centred(box);
     WideNode<N> node;
     for (int i = 0; i < N; ++i) {
-        const BBox b = i == 0 ? box : BBox{};
-        for (int a = 0; a < 3; ++a) node.lower(a, i) = b.lower[a], node.upper(a, i) = b.upper[a];
+        frame.set_box(node, i, i == 0 ? box : BBox{});
         node.child[i] = i == 0 ? 0 : WideNode<N>::kEmpty;
         node.count[i] = 0;
     }
-    const detail::SlabRay<N> slab(ray, plane_bound(box), robust);
+    const detail::SlabRay<N> slab(ray, frame, robust);
     const detail::NodeRay<N> lanes(slab);
     std::array<float, N> tnear;
     const float tmin = kernel_tmin(ray);
@@ -96,7 +97,7 @@ bool node_test_hits(const BBox& box, const Ray& ray, bool robust) {
     else return detail::intersect_children<N>(node, lanes, simd::Simd<N>::set1(tmin), ray.tmax, tnear) & 1;
 }
 
-// Boxes at offsets out to 1e30 and scales from 1e-4 to 1e4 (some flat), rays from afar or from near the coordinate
+// Boxes at offsets out to 1e30 and scales from 1e-30 to 1e30 (some flat), rays from afar or from near the coordinate
 // origin aimed exactly at a corner, an edge or a face point, and rays with zero direction components whose origin
 // lies in the box's slab, on its planes included. Returns {touching rays, those the node test culls}.
 template <int N>
@@ -106,7 +107,7 @@ std::pair<size_t, size_t> culled_touching_rays(bool robust) {
     size_t touching = 0, culled = 0;
     // Past 1.8e19 an origin times a zero component's reciprocal (2^64) overflows: SlabRay disables that axis.
     for (const float offset : {0.0f, 1e3f, 1e5f, 1e7f, 1e20f, 1e30f})
-        for (const float scale : {1e-4f, 1.0f, 1e4f})
+        for (const float scale : {1e-30f, 1e-4f, 1.0f, 1e4f, 1e30f})
             for (int i = 0; i < 400; ++i) {
                 BBox box;
                 const Vec3 corner = Vec3(offset) + scale * Vec3(unit(rng), unit(rng), unit(rng));

@@ -137,11 +137,13 @@ TEST_CASE("metrics of wide trees", "[metrics]") {
     CHECK(epo_cost(collapse<4>(pair.bvh, pair.tris), pair.tris) == Approx(pair.epo));
     CHECK(sah_cost(collapse<8>(pair.bvh, pair.tris)) == Approx(sah_cost(pair.bvh)));
 
-    // Built trees: width 2 keeps every box and cost; width 8 removes inner nodes, so its SAH is lower.
+    // Built trees: width 2 keeps every box and cost, up to the planes' outward rounding into the tree's frame (at
+    // most a float spacing of its extent: EPO 2e-7 higher on this scene); width 8 removes inner nodes, so its SAH
+    // is lower.
     const FlatScene flat = flatten(load_scene("gen:box?tris=3000&seed=6"));
     const BuiltScene built = build_with("binned", flat.triangles);
     CHECK(sah_cost(built.bvh2) == Approx(sah_cost(built.binary)).epsilon(1e-5));
-    CHECK(epo_cost(built.bvh2, flat.triangles) == Approx(epo_cost(built.binary, flat.triangles)).epsilon(1e-9));
+    CHECK(epo_cost(built.bvh2, flat.triangles) == Approx(epo_cost(built.binary, flat.triangles)).epsilon(1e-6));
     CHECK(sah_cost(built.bvh8) < sah_cost(built.binary));
     CHECK(epo_cost(built.bvh8, flat.triangles) > 0.0);
 }

@@ -86,7 +86,7 @@ struct PlainPlan {
 // written. With `triangles`, leaves are filled with them, and with blocks (N > 2) the one-triangle leaves of a node
 // share blocks, a lane each, and an inner child is one leaf of its subtree's triangles in depth-first order where
 // the plan merged it, or greedily where its subtree is at most a block's lanes of one-triangle leaves; without,
-// each leaf is a run.
+// each leaf is a run. Planes are written in `frame`.
 template <int N>
 struct SerialCollapse {
     using Leaf = LeafOf<N>;
@@ -97,11 +97,13 @@ struct SerialCollapse {
     std::vector<LeafRun> runs;
     std::vector<Leaf> leaves;
     uint32_t entries = 0;
+    PlaneFrame frame;
 
     std::optional<PlainPlan<N>> plan;
 
-    SerialCollapse(const Bvh& tree, std::span<const Triangle> tris = {}, CollapseMethod method = CollapseMethod::Greedy)
-        : bvh(tree), triangles(tris) {
+    SerialCollapse(const Bvh& tree, const PlaneFrame& planes, std::span<const Triangle> tris = {},
+                   CollapseMethod method = CollapseMethod::Greedy)
+        : bvh(tree), triangles(tris), frame(planes) {
         if (method == CollapseMethod::Optimal && N > 2) plan.emplace(PlainPlan<N>{tree, blocks(), {}});
         nodes.resize(1);
         write(0, tree.nodes[0].is_leaf() ? std::vector<uint32_t>{0} : open(0));
@@ -130,7 +132,7 @@ struct SerialCollapse {
         WideNode<N> node;
         for (int i = 0; i < N; ++i) {
             const BBox box = i < int(children.size()) ? bvh.nodes[children[i]].bounds : BBox{};
-            for (int a = 0; a < 3; ++a) node.lower(a, i) = box.lower[a], node.upper(a, i) = box.upper[a];
+            frame.set_box(node, i, box);
             node.child[i] = WideNode<N>::kEmpty;
             node.count[i] = 0;
         }
@@ -228,18 +230,21 @@ const char* name_of(CollapseMethod method) { return method == CollapseMethod::Op
 template <int N>
 void check_against_serial(const Bvh& bvh, std::span<const Triangle> tris, const std::string& what) {
     INFO(what << " bvh" << N);
-    const SerialCollapse<N> runs_only(bvh);  // the node half is greedy
+    const PlaneFrame centred = PlaneFrame::centred(bvh.nodes[0].bounds);
+    const SerialCollapse<N> runs_only(bvh, centred);  // the node half is greedy
     WideNodes<N> nodes;
     uint32_t entries = 0;
-    const std::vector<LeafRun> runs = collapse_nodes<N>(bvh, nodes, &leaf_entries, entries);
+    const std::vector<LeafRun> runs = collapse_nodes<N>(bvh, nodes, centred, &leaf_entries, entries);
     CHECK(same_bytes(nodes, runs_only.nodes));
     CHECK(same_bytes(runs, runs_only.runs));
     CHECK(entries == runs_only.entries);
 
     for (const CollapseMethod method : kMethods) {
         INFO(name_of(method));
-        const SerialCollapse<N> expected(bvh, tris, method);
+        const SerialCollapse<N> expected(bvh, centred, tris, method);
         const WideBvh<N> wide = collapse<N>(bvh, tris, method);
+        CHECK(wide.frame.origin == centred.origin);
+        CHECK(wide.frame.bound == centred.bound);
         CHECK(same_bytes(wide.nodes, expected.nodes));
         CHECK(same_bytes(wide.leaves, expected.leaves));
     }
@@ -269,7 +274,7 @@ double modelled_cost(const WideBvh<N>& wide) {
     for (const WideNode<N>& node : wide.nodes)
         for (int i = 0; i < N; ++i) {
             if (node.is_empty(i)) continue;
-            const BBox box{Vec3(node.lower(0, i), node.lower(1, i), node.lower(2, i)), Vec3(node.upper(0, i), node.upper(1, i), node.upper(2, i))};
+            const BBox box = wide.frame.box(node, i);
             cost += double(box.half_area()) * (node.is_leaf(i) ? double(leaf_entries(N, node.count[i])) : 1.0);
         }
     return cost;
