@@ -120,6 +120,8 @@ void run_render(RenderOptions o) {
     settings.stream_paths = o.stream_paths;
     settings.batch_traversal = parse_batch_traversal(o.batch_traversal);
     const ShadingScene shading{p.flat, settings};
+    // One bar, rank 0's, when its stderr is a terminal. Open MPI hands ranks their stderr as a pipe (and stdout as
+    // a terminal even when mpirun's output goes to a file), so under mpirun there is none.
     const bool terminal = distributed::is_root() && isatty(fileno(stderr));
     const auto render_start = std::chrono::steady_clock::now();
     const SampledImage image = render_samples(*p.accel, shading, camera, 0, o.spp, terminal ? print_progress : nullptr);
