@@ -60,6 +60,8 @@ PY
     echo "$output"
     [ "$status" -ne 124 ] || fail "the job hung (killed after 30 s)"
     [ "$status" -ne 0 ] || fail "the job exited 0"
+    # Under the sanitizer presets a report also exits non-zero: it must not pass.
+    ! grep -qE "(Address|Leak|UndefinedBehavior)Sanitizer|runtime error:" <<<"$output" || fail "sanitizer report"
     grep -qF "tris" <<<"$output" || fail "no message naming the generator's field"
     [ "$(grep -c 'canopy: error:.*(rank 1 on ' <<<"$output")" -eq 1 ] || fail "not one error message from rank 1"
     echo "ok: exit $status after $(( $(date +%s) - start )) s"
