@@ -69,6 +69,8 @@ void checked(const std::function<void()>& work) {
     std::string error;
     try {
         work();
+    } catch (const JobError&) {
+        throw;  // every rank has it already: agreeing again would wait for ranks that are not coming
     } catch (const std::exception& e) {
         error = e.what() + where();
     }

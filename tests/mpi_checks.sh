@@ -55,7 +55,7 @@ PY
     ;;
   bad_scene)
     start=$(date +%s)
-    output=$(timeout 30 "${mpirun[@]}" "$canopy" study 'gen:box?tris=500' 'gen:box?tris=abc' --builder binned --size 8 8 2>&1)
+    output=$(timeout 30 "${mpirun[@]}" "$canopy" study 'gen:box?tris=100' 'gen:box?tris=abc' --builder binned --size 4 4 --repeats 1 2>&1)
     status=$?
     echo "$output"
     [ "$status" -ne 124 ] || fail "the job hung (killed after 30 s)"

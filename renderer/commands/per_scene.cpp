@@ -31,15 +31,19 @@ void SceneReport::flush() {
 }
 
 std::vector<nlohmann::json> run_per_scene(const std::vector<std::string>& scenes,
-                                          const std::function<nlohmann::json(const std::string&, SceneReport&)>& work) {
+                                          const std::function<SceneWork(const std::string&)>& load) {
     const size_t ranks = size_t(distributed::ranks()), rank = size_t(distributed::rank());
     std::vector<nlohmann::json> results;
     for (size_t round = 0; round * ranks < scenes.size(); ++round) {
         const size_t mine = round * ranks + rank;
+        SceneWork work;
+        distributed::checked([&] {
+            if (mine < scenes.size()) work = load(scenes[mine]);
+        });
         SceneReport report(distributed::is_root());  // rank 0's scene is the round's first: it prints at once
         std::optional<nlohmann::json> result;
         distributed::checked([&] {
-            if (mine < scenes.size()) result = work(scenes[mine], report);
+            if (work) result = work(report);
         });
         const nlohmann::json sent = result ? nlohmann::json{{"report", report.text()}, {"result", *result}} : nullptr;
         for (const std::string& received : distributed::gather_to_root(sent.dump())) {

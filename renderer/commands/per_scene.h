@@ -24,11 +24,15 @@ private:
     std::string text_;
 };
 
-// Runs `work` for each scene, scene i on rank (i mod ranks), a round of `ranks` scenes at a time; returns on
-// rank 0 every scene's JSON in the scenes' order, each scene's report printed before it is returned (other
-// ranks get nothing). An error in any rank's scene ends the round on every rank with that rank's message
-// (distributed::JobError). Collective.
+// A scene's measurement once the scene is loaded: it prints to the report and returns the scene's JSON.
+using SceneWork = std::function<nlohmann::json(SceneReport&)>;
+
+// For each scene, `load` and then the work it returns, scene i on rank (i mod ranks), a round of `ranks` scenes at
+// a time; returns on rank 0 every scene's JSON in the scenes' order, each scene's report printed before it is
+// returned (other ranks get nothing). The ranks agree after a round's loads and again after its work: a scene
+// that cannot be loaded stops the job on every rank with its rank's message (distributed::JobError) before any
+// other rank measures. Collective.
 std::vector<nlohmann::json> run_per_scene(const std::vector<std::string>& scenes,
-                                          const std::function<nlohmann::json(const std::string&, SceneReport&)>& work);
+                                          const std::function<SceneWork(const std::string&)>& load);
 
 }  // namespace canopy

@@ -12,6 +12,7 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <memory>
 #include <optional>
 
 namespace canopy {
@@ -238,10 +239,8 @@ Row row_from_json(const nlohmann::json& j) {
 }
 
 // One scene's rows, every builder's trees built and timed in this process.
-SceneResult study_scene(const std::string& scene_name, const std::vector<std::string>& names, const StudyOptions& o,
-                        SceneReport& report) {
-    const Scene scene = load_scene(scene_name);
-    const FlatScene flat = flatten(scene);
+SceneResult study_scene(const std::string& scene_name, const Scene& scene, const FlatScene& flat,
+                        const std::vector<std::string>& names, const StudyOptions& o, SceneReport& report) {
     const PinholeCamera camera(scene_camera(scene, flat), o.width, o.height);
     auto reference = make_canopy_accelerator(flat, {"binned", "", "auto"});
     reference->prepare();
@@ -277,14 +276,18 @@ void fit(SceneResult& result) {
 
 // Every scene's rows, on rank 0 (under a job, each scene measured by one rank: per_scene.h), and their fits.
 std::vector<SceneResult> study_scenes(const std::vector<std::string>& names, const StudyOptions& o) {
-    const auto study = [&](const std::string& scene_name, SceneReport& report) {
-        const SceneResult result = study_scene(scene_name, names, o, report);
-        nlohmann::json rows = nlohmann::json::array();
-        for (const Row& r : result.rows) rows.push_back(row_json(r));
-        return nlohmann::json{{"scene", result.scene}, {"rows", rows}};
+    const auto load = [&](const std::string& scene_name) -> SceneWork {
+        const auto scene = std::make_shared<const Scene>(load_scene(scene_name));
+        const auto flat = std::make_shared<const FlatScene>(flatten(*scene));
+        return [&, scene_name, scene, flat](SceneReport& report) {
+            const SceneResult result = study_scene(scene_name, *scene, *flat, names, o, report);
+            nlohmann::json rows = nlohmann::json::array();
+            for (const Row& r : result.rows) rows.push_back(row_json(r));
+            return nlohmann::json{{"scene", result.scene}, {"rows", rows}};
+        };
     };
     std::vector<SceneResult> results;
-    for (const nlohmann::json& scene : run_per_scene(o.scenes, study)) {
+    for (const nlohmann::json& scene : run_per_scene(o.scenes, load)) {
         SceneResult& r = results.emplace_back();
         r.scene = scene.at("scene");
         for (const nlohmann::json& row : scene.at("rows")) r.rows.push_back(row_from_json(row));
