@@ -4,7 +4,8 @@
 #   tradeoff:  the same for the reference that two ranks render;
 #   study:     two ranks' study of three scenes gives the rows of three one-process studies (the deterministic
 #              columns: builder and tree metrics, not timings), each row naming its host;
-#   bad_scene: a scene that fails on rank 1 alone ends the job within 30 s, non-zero, with rank 1's message once.
+#   bad_scene: a scene that fails on rank 1 alone ends the job within 30 s (CANOPY_MPI_TIMEOUT), non-zero, with
+#              rank 1's message once.
 # usage: mpi_checks.sh CHECK CANOPY MPIEXEC PYTHON WORK_DIR
 set -uo pipefail
 check=$1 canopy=$2 mpiexec=$3 python=$4 work=$5
@@ -54,11 +55,12 @@ print("ok: the rows of", len(two), "scenes match")
 PY
     ;;
   bad_scene)
+    limit=${CANOPY_MPI_TIMEOUT:-30}
     start=$(date +%s)
-    output=$(timeout 30 "${mpirun[@]}" "$canopy" study 'gen:box?tris=100' 'gen:box?tris=abc' --builder binned --size 4 4 --repeats 1 2>&1)
+    output=$(timeout "$limit" "${mpirun[@]}" "$canopy" study 'gen:box?tris=100' 'gen:box?tris=abc' --builder binned --size 4 4 --repeats 1 2>&1)
     status=$?
     echo "$output"
-    [ "$status" -ne 124 ] || fail "the job hung (killed after 30 s)"
+    [ "$status" -ne 124 ] || fail "the job hung (killed after $limit s)"
     [ "$status" -ne 0 ] || fail "the job exited 0"
     # Under the sanitizer presets a report also exits non-zero: it must not pass.
     ! grep -qE "(Address|Leak|UndefinedBehavior)Sanitizer|runtime error:" <<<"$output" || fail "sanitizer report"
