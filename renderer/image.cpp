@@ -8,6 +8,18 @@
 
 namespace canopy {
 
+Image::Image(int width, int height, std::vector<float> sums) : width_(width), height_(height), rgb_(std::move(sums)) {
+    if (rgb_.size() != size_t(width) * size_t(height) * 3)
+        throw std::invalid_argument("an image of " + std::to_string(width) + "x" + std::to_string(height) + " from " +
+                                    std::to_string(rgb_.size()) + " floats");
+}
+
+Image& Image::operator+=(const Image& other) {
+    if (other.rgb_.size() != rgb_.size()) throw std::invalid_argument("adding images of different sizes");
+    for (size_t i = 0; i < rgb_.size(); ++i) rgb_[i] += other.rgb_[i];
+    return *this;
+}
+
 std::vector<float> Image::average(int samples) const {
     std::vector<float> out(rgb_.size());
     const float scale = samples > 0 ? 1.0f / float(samples) : 0.0f;

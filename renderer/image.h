@@ -2,6 +2,7 @@
 #include "accel/geometry.h"
 
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace canopy {
@@ -10,12 +11,18 @@ namespace canopy {
 class Image {
 public:
     Image(int width, int height) : width_(width), height_(height), rgb_(size_t(width) * size_t(height) * 3, 0.0f) {}
+    // An image holding these sums (width x height x 3 floats), as another process accumulated them.
+    Image(int width, int height, std::vector<float> sums);
 
     void add(int x, int y, const Vec3& c) {
         float* p = &rgb_[(size_t(y) * size_t(width_) + size_t(x)) * 3];
         p[0] += c.x, p[1] += c.y, p[2] += c.z;
     }
     void clear() { std::fill(rgb_.begin(), rgb_.end(), 0.0f); }
+    // Adds another image's sums, pixel by pixel: the two must be the same size.
+    Image& operator+=(const Image& other);
+    // The accumulated sums, moved out (to send them to another process).
+    std::vector<float> take_sums() && { return std::move(rgb_); }
     std::vector<float> average(int samples) const;
     // Mean over all pixels and channels of the average: the protocol's "mean pixel value".
     double mean(int samples) const;

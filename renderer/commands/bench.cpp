@@ -3,7 +3,9 @@
 #include "accel/builder.h"
 #include "kernels/dispatch.h"
 #include "renderer/accelerator.h"
+#include "renderer/distributed.h"
 #include "renderer/commands/dynamic.h"
+#include "renderer/commands/per_scene.h"
 #include "renderer/commands/render.h"
 #include "renderer/wavefront.h"
 
@@ -15,6 +17,7 @@
 #include <chrono>
 #include <cstdio>
 #include <fstream>
+#include <memory>
 #include <numeric>
 #include <optional>
 #include <stdexcept>
@@ -215,56 +218,56 @@ std::string fixed1(double v) {
     return text;
 }
 
-void print_table(const std::vector<Entry>& entries, uint64_t tris) {
+void print_table(const std::vector<Entry>& entries, uint64_t tris, SceneReport& out) {
     const Entry* ref = reference_of(entries);
     const std::optional<double> embree_lines = embree_lines_estimate(entries);
     int width = 22;  // the label column fits the longest label
     for (const Entry& e : entries) width = std::max(width, int(e.label().size()));
-    std::printf("\n%-*s %10s %8s %10s %8s %11s %8s %7s %7s %9s %9s %7s %8s %8s %7s %8s %10s", width,
-                "accelerator", "build ms", "Mprim/s", "frame ms", "Mrays/s", "rays/frame", "SAH", "EPO", "wSAH", "nodes",
-                "leaves", "split%", "split ms", "%build", "alloc%", "MB", "img mean");
-    std::printf(" %9s", "lines/ray");
+    out.printf("\n%-*s %10s %8s %10s %8s %11s %8s %7s %7s %9s %9s %7s %8s %8s %7s %8s %10s", width,
+               "accelerator", "build ms", "Mprim/s", "frame ms", "Mrays/s", "rays/frame", "SAH", "EPO", "wSAH", "nodes",
+               "leaves", "split%", "split ms", "%build", "alloc%", "MB", "img mean");
+    out.printf(" %9s", "lines/ray");
     const bool streams = std::any_of(entries.begin(), entries.end(), [](const Entry& e) { return e.tracer == TracerKind::Stream; });
-    if (ref) std::printf(" %9s %9s", "build/emb", "frame/emb");
-    if (ref && streams) std::printf(" %10s", "frame/same");  // against Embree with the row's own tracer
-    std::printf("\n");
+    if (ref) out.printf(" %9s %9s", "build/emb", "frame/emb");
+    if (ref && streams) out.printf(" %10s", "frame/same");  // against Embree with the row's own tracer
+    out.printf("\n");
     for (const Entry& e : entries) {
         const AcceleratorReport& r = e.report;
         const double frame = e.frame_mean();
-        std::printf("%-*s %10.2f %8.2f %10.2f %8.2f %11.0f ", width, e.label().c_str(), e.build_min(),
-                    double(tris) / e.build_min() / 1e3, frame, e.rays_per_frame() / frame / 1e3, e.rays_per_frame());
-        if (r.sah) std::printf("%8.2f ", *r.sah);
-        else std::printf("%8s ", "-");
-        if (r.epo) std::printf("%7.2f ", *r.epo);
-        else std::printf("%7s ", "-");
-        if (r.layout_sah) std::printf("%7.2f ", *r.layout_sah);  // eq. 1 of the traversal layout, wide nodes
-        else std::printf("%7s ", "-");
-        if (r.nodes) std::printf("%9llu %9llu ", (unsigned long long)*r.nodes, (unsigned long long)*r.leaves);
-        else std::printf("%9s %9s ", "-", "-");
-        if (r.refs_per_tri) std::printf("%7.1f ", 100.0 * (*r.refs_per_tri - 1.0));  // two-level rows have none
-        else std::printf("%7s ", "-");
+        out.printf("%-*s %10.2f %8.2f %10.2f %8.2f %11.0f ", width, e.label().c_str(), e.build_min(),
+                   double(tris) / e.build_min() / 1e3, frame, e.rays_per_frame() / frame / 1e3, e.rays_per_frame());
+        if (r.sah) out.printf("%8.2f ", *r.sah);
+        else out.printf("%8s ", "-");
+        if (r.epo) out.printf("%7.2f ", *r.epo);
+        else out.printf("%7s ", "-");
+        if (r.layout_sah) out.printf("%7.2f ", *r.layout_sah);  // eq. 1 of the traversal layout, wide nodes
+        else out.printf("%7s ", "-");
+        if (r.nodes) out.printf("%9llu %9llu ", (unsigned long long)*r.nodes, (unsigned long long)*r.leaves);
+        else out.printf("%9s %9s ", "-", "-");
+        if (r.refs_per_tri) out.printf("%7.1f ", 100.0 * (*r.refs_per_tri - 1.0));  // two-level rows have none
+        else out.printf("%7s ", "-");
         // Split pass time against this build's minimum (Table 4), reference slots allocated beyond one per triangle.
-        if (r.split_ms) std::printf("%8.2f %8.1f %7.1f ", *r.split_ms, 100.0 * *r.split_ms / e.build_min(),
-                                    100.0 * (*r.ref_capacity_per_tri - 1.0));
-        else std::printf("%8s %8s %7s ", "-", "-", "-");
-        std::printf("%8.1f %10.5f", r.bytes ? double(*r.bytes) / 1e6 : 0.0, e.image_mean);
-        if (const std::optional<double> lines = e.per_ray(&TraversalCounts::cache_lines)) std::printf(" %9.1f", *lines);
-        else if (e.accel->library() == "embree" && embree_lines) std::printf(" %9s", ("~" + fixed1(*embree_lines)).c_str());
-        else std::printf(" %9s", "-");
-        if (ref) std::printf(" %9.3f %9.3f", e.build_min() / ref->build_min(), frame / ref->frame_mean());
+        if (r.split_ms) out.printf("%8.2f %8.1f %7.1f ", *r.split_ms, 100.0 * *r.split_ms / e.build_min(),
+                                   100.0 * (*r.ref_capacity_per_tri - 1.0));
+        else out.printf("%8s %8s %7s ", "-", "-", "-");
+        out.printf("%8.1f %10.5f", r.bytes ? double(*r.bytes) / 1e6 : 0.0, e.image_mean);
+        if (const std::optional<double> lines = e.per_ray(&TraversalCounts::cache_lines)) out.printf(" %9.1f", *lines);
+        else if (e.accel->library() == "embree" && embree_lines) out.printf(" %9s", ("~" + fixed1(*embree_lines)).c_str());
+        else out.printf(" %9s", "-");
+        if (ref) out.printf(" %9.3f %9.3f", e.build_min() / ref->build_min(), frame / ref->frame_mean());
         if (const Entry* same = reference_of(entries, e.tracer); ref && streams && same)
-            std::printf(" %10.3f", frame / same->frame_mean());
-        std::printf("\n");
+            out.printf(" %10.3f", frame / same->frame_mean());
+        out.printf("\n");
     }
-    if (ref) std::printf("ratios against %s, measured in this run%s\n", ref->label().c_str(),
-                         streams ? "; frame/same: against Embree MEDIUM with the row's tracer" : "");
-    std::printf("lines/ray: 64-byte lines of the nodes and leaves a ray of the first timed frame visits (single-ray "
-                "counting kernel)%s\n", embree_lines ? "; ~Embree: estimated from its node and leaf sizes over the "
-                "first canopy bvh8 row's visits" : "");
+    if (ref) out.printf("ratios against %s, measured in this run%s\n", ref->label().c_str(),
+                        streams ? "; frame/same: against Embree MEDIUM with the row's tracer" : "");
+    out.printf("lines/ray: 64-byte lines of the nodes and leaves a ray of the first timed frame visits (single-ray "
+               "counting kernel)%s\n", embree_lines ? "; ~Embree: estimated from its node and leaf sizes over the "
+               "first canopy bvh8 row's visits" : "");
     for (const Entry& e : entries)
         if (e.tracer == TracerKind::Stream)
-            std::printf("%s: sorting %.1f%% of the frame, stream memory %.1f MB (all threads)\n", e.label().c_str(),
-                        100.0 * e.sort_share(), double(e.stream->bytes.load()) / 1e6);
+            out.printf("%s: sorting %.1f%% of the frame, stream memory %.1f MB (all threads)\n", e.label().c_str(),
+                       100.0 * e.sort_share(), double(e.stream->bytes.load()) / 1e6);
 }
 
 // The rows of one thread count.
@@ -276,6 +279,7 @@ nlohmann::json results_json(const std::vector<Entry>& entries, uint64_t tris) {
         const bool canopy = e.accel->library() == "canopy";
         const double frame = e.frame_mean();
         results.push_back({{"accel", e.accel->library()},
+                           {"host", distributed::host()},
                            {"builder", canopy ? nlohmann::json(e.accel->builder()) : nlohmann::json(nullptr)},
                            {"kernel", canopy ? nlohmann::json(e.accel->kernel()) : nlohmann::json(nullptr)},
                            {"chosen", e.accel->chosen().empty() ? nlohmann::json(nullptr) : nlohmann::json(e.accel->chosen())},
@@ -408,23 +412,23 @@ const Entry* two_level_row(const std::vector<Entry>& entries) {
 }
 
 // Sec. 6.3, Table 3: per frame, the rebuild, the frame and their sum, the sums against plain two-level.
-void print_dynamic_table(const std::vector<Entry>& entries) {
+void print_dynamic_table(const std::vector<Entry>& entries, SceneReport& out) {
     const Entry* ref = two_level_row(entries);
-    std::printf("\n%-30s %11s %11s %11s %11s %11s %8s %7s %10s\n", "accelerator", "first build", "rebuild ms",
-                "render ms", "total ms", "total/2lvl", "wSAH", "BRefs", "img mean");
+    out.printf("\n%-30s %11s %11s %11s %11s %11s %8s %7s %10s\n", "accelerator", "first build", "rebuild ms",
+               "render ms", "total ms", "total/2lvl", "wSAH", "BRefs", "img mean");
     for (const Entry& e : entries) {
         const AcceleratorReport& r = e.report;
-        std::printf("%-30s %11.2f %11.2f %11.2f %11.2f ", e.label().c_str(), e.build_min(), e.rebuild_mean(),
-                    e.frame_mean(), e.total_mean());
-        if (ref) std::printf("%10.2fx ", e.total_mean() / ref->total_mean());
-        else std::printf("%11s ", "-");
-        if (r.layout_sah) std::printf("%8.2f ", *r.layout_sah);
-        else std::printf("%8s ", "-");
-        if (r.brefs) std::printf("%7llu ", (unsigned long long)*r.brefs);
-        else std::printf("%7s ", "-");
-        std::printf("%10.5f\n", e.image_mean);
+        out.printf("%-30s %11.2f %11.2f %11.2f %11.2f ", e.label().c_str(), e.build_min(), e.rebuild_mean(),
+                   e.frame_mean(), e.total_mean());
+        if (ref) out.printf("%10.2fx ", e.total_mean() / ref->total_mean());
+        else out.printf("%11s ", "-");
+        if (r.layout_sah) out.printf("%8.2f ", *r.layout_sah);
+        else out.printf("%8s ", "-");
+        if (r.brefs) out.printf("%7llu ", (unsigned long long)*r.brefs);
+        else out.printf("%7s ", "-");
+        out.printf("%10.5f\n", e.image_mean);
     }
-    std::printf("per frame means over the timed frames; wSAH and BRefs of the last frame's structure\n");
+    out.printf("per frame means over the timed frames; wSAH and BRefs of the last frame's structure\n");
 }
 
 nlohmann::json dynamic_json(const std::vector<Entry>& entries, const BenchOptions& o, const DynamicObject& object,
@@ -433,6 +437,7 @@ nlohmann::json dynamic_json(const std::vector<Entry>& entries, const BenchOption
     for (const Entry& e : entries) {
         const bool canopy = e.accel->library() == "canopy";
         results.push_back({{"accel", e.accel->library()},
+                           {"host", distributed::host()},
                            {"label", e.label()},
                            {"builder", canopy ? nlohmann::json(e.accel->builder()) : nlohmann::json(nullptr)},
                            {"kernel", canopy ? nlohmann::json(e.accel->kernel()) : nlohmann::json(nullptr)},
@@ -457,13 +462,13 @@ nlohmann::json dynamic_json(const std::vector<Entry>& entries, const BenchOption
             {"results", results}};
 }
 
-void report_static(const std::vector<Entry>& entries, uint64_t tris) {
-    print_table(entries, tris);
+void report_static(const std::vector<Entry>& entries, uint64_t tris, SceneReport& out) {
+    print_table(entries, tris, out);
     for (const Entry& e : entries) {
-        if (!e.accel->reason().empty()) std::printf("%s: %s\n", e.label().c_str(), e.accel->reason().c_str());
+        if (!e.accel->reason().empty()) out.printf("%s: %s\n", e.label().c_str(), e.accel->reason().c_str());
         if (e.report.top_level_ms)
-            std::printf("%s: object trees %.2f ms, top level %.3f ms (fastest of the builds) over %llu BRefs\n", e.label().c_str(),
-                        *e.report.objects_ms, *e.report.top_level_ms, (unsigned long long)*e.report.brefs);
+            out.printf("%s: object trees %.2f ms, top level %.3f ms (fastest of the builds) over %llu BRefs\n", e.label().c_str(),
+                       *e.report.objects_ms, *e.report.top_level_ms, (unsigned long long)*e.report.brefs);
     }
 }
 
@@ -474,66 +479,100 @@ std::string thread_counts_text(const std::vector<int>& counts) {
     return text;
 }
 
-}  // namespace
+// A scene of a bench, loaded and flattened (timed: reported, not in build times).
+struct LoadedScene {
+    Scene scene;
+    FlatScene flat;  // a dynamic object moves in it
+    double load_ms = 0, flatten_ms = 0;
+};
 
-void run_bench(const BenchOptions& o) {
+std::shared_ptr<LoadedScene> load_bench_scene(const BenchOptions& o) {
+    auto loaded = std::make_shared<LoadedScene>();
     auto start = Clock::now();
-    const std::vector<BuildPlan> plans = build_plans(o);
-    const Scene scene = load_scene_within_memory(o.scene, plans, o.memory_limit);
-    const double load_ms = ms_since(start);
+    loaded->scene = load_scene_within_memory(o.scene, build_plans(o), o.memory_limit);
+    loaded->load_ms = ms_since(start);
     start = Clock::now();
-    FlatScene flat = flatten(scene);  // a dynamic object moves in it
-    const double flatten_ms = ms_since(start);
-    const uint64_t tris = flat.triangles.size();
-    start = Clock::now();
-    (void)make_prim_refs(flat.triangles);
-    const double primref_ms = ms_since(start);
-    std::printf("scene %s: %llu triangles; load %.1f ms, flatten %.1f ms, PrimRefs %.1f ms (not in build times)\n",
-                o.scene.c_str(), (unsigned long long)tris, load_ms, flatten_ms, primref_ms);
-    const std::optional<DynamicObject> dynamic =
-        o.dynamic ? std::optional(choose_dynamic_object(scene, flat, *o.dynamic)) : std::nullopt;
-    if (dynamic) {
-        std::printf("dynamic-in-static (Benthin et al. 2017, sec. 6.3, Table 3): placement %u '%s', %zu triangles "
-                    "(%.2f%% of the scene), turning about an axis %.4g from its centre, a turn in %u frames\n",
-                    dynamic->placement, dynamic->name.c_str(), dynamic->triangles.size(),
-                    100.0 * double(dynamic->triangles.size()) / double(tris), dynamic->path_radius, kFramesPerTurn);
-        std::printf("protocol: %dx%d, %d bounces, 1 first build, then per frame a move, a timed rebuild and a timed "
-                    "frame; %d frames (mean) after 1 warm-up at rest, threads %s\n",
-                    o.width, o.height, o.bounces, o.frames, thread_counts_text(o.threads).c_str());
-    } else {
-        std::printf("protocol: %dx%d, %d bounces, %d builds (min), %d frames (mean) after 1 warm-up, threads %s%s\n",
-                    o.width, o.height, o.bounces, o.builds, o.frames, thread_counts_text(o.threads).c_str(),
-                    std::count(o.tracers.begin(), o.tracers.end(), "stream")
-                        ? ("; stream batches of " + std::to_string(o.stream_paths) + " paths").c_str() : "");
-    }
+    loaded->flat = flatten(loaded->scene);
+    loaded->flatten_ms = ms_since(start);
+    return loaded;
+}
 
-    if (dynamic && o.tracers.size() > 1) throw std::invalid_argument("--dynamic takes one --tracer (its rows move their accelerator)");
-    if (dynamic && o.threads.size() > 1) throw std::invalid_argument("--dynamic takes one --threads (its rows move the scene)");
-    if (dynamic) {
-        std::optional<tbb::global_control> limit;
-        if (o.threads[0] > 0) limit.emplace(tbb::global_control::max_allowed_parallelism, size_t(o.threads[0]));
-        std::vector<Entry> entries = make_entries(scene, flat, o, o.threads[0]);
-        build_all(entries, 1);
-        render_frames(entries, scene, flat, o, &*dynamic);
-        for (Entry& e : entries) e.report = e.accel->report(false);
-        print_dynamic_table(entries);
-        return write_json(dynamic_json(entries, o, *dynamic, tris), o.json_path);
-    }
-    // Each thread count is a whole protocol run of its own, with Embree on as many threads; its rows' ratios are
-    // against the Embree row of the same count.
+// Sec. 6.3's protocol: one thread count, every row moving its accelerator's dynamic object.
+nlohmann::json bench_dynamic(const BenchOptions& o, LoadedScene& loaded, const DynamicObject& dynamic, SceneReport& out) {
+    if (o.tracers.size() > 1) throw std::invalid_argument("--dynamic takes one --tracer (its rows move their accelerator)");
+    if (o.threads.size() > 1) throw std::invalid_argument("--dynamic takes one --threads (its rows move the scene)");
+    std::optional<tbb::global_control> limit;
+    if (o.threads[0] > 0) limit.emplace(tbb::global_control::max_allowed_parallelism, size_t(o.threads[0]));
+    std::vector<Entry> entries = make_entries(loaded.scene, loaded.flat, o, o.threads[0]);
+    build_all(entries, 1);
+    render_frames(entries, loaded.scene, loaded.flat, o, &dynamic);
+    for (Entry& e : entries) e.report = e.accel->report(false);
+    print_dynamic_table(entries, out);
+    return dynamic_json(entries, o, dynamic, loaded.flat.triangles.size());
+}
+
+// Each thread count is a whole protocol run of its own, with Embree on as many threads; its rows' ratios are
+// against the Embree row of the same count.
+nlohmann::json bench_static(const BenchOptions& o, LoadedScene& loaded, SceneReport& out) {
+    const uint64_t tris = loaded.flat.triangles.size();
     nlohmann::json results = nlohmann::json::array();
     for (const int threads : o.threads) {
         std::optional<tbb::global_control> limit;
         if (threads > 0) limit.emplace(tbb::global_control::max_allowed_parallelism, size_t(threads));
-        if (o.threads.size() > 1) std::printf("\n%s:", threads_text(threads).c_str());
-        std::vector<Entry> entries = make_entries(scene, flat, o, threads);
+        if (o.threads.size() > 1) out.printf("\n%s:", threads_text(threads).c_str());
+        std::vector<Entry> entries = make_entries(loaded.scene, loaded.flat, o, threads);
         build_all(entries, o.builds);
-        render_frames(entries, scene, flat, o, nullptr);
+        render_frames(entries, loaded.scene, loaded.flat, o, nullptr);
         for (Entry& e : entries) e.report = e.accel->report(o.epo);
-        report_static(entries, tris);
+        report_static(entries, tris, out);
         for (nlohmann::json& row : results_json(entries, tris)) results.push_back(std::move(row));
     }
-    write_json(to_json(results, o, tris), o.json_path);
+    return to_json(results, o, tris);
 }
+
+// One scene's bench (o.scene): every accelerator built and rendered alternately in this process; its JSON.
+nlohmann::json bench_scene(const BenchOptions& o, LoadedScene& loaded, SceneReport& out) {
+    const uint64_t tris = loaded.flat.triangles.size();
+    auto start = Clock::now();
+    (void)make_prim_refs(loaded.flat.triangles);
+    const double primref_ms = ms_since(start);
+    out.printf("scene %s: %llu triangles; load %.1f ms, flatten %.1f ms, PrimRefs %.1f ms (not in build times)%s\n",
+               o.scene.c_str(), (unsigned long long)tris, loaded.load_ms, loaded.flatten_ms, primref_ms,
+               distributed::where().c_str());
+    const std::optional<DynamicObject> dynamic =
+        o.dynamic ? std::optional(choose_dynamic_object(loaded.scene, loaded.flat, *o.dynamic)) : std::nullopt;
+    if (dynamic) {
+        out.printf("dynamic-in-static (Benthin et al. 2017, sec. 6.3, Table 3): placement %u '%s', %zu triangles "
+                   "(%.2f%% of the scene), turning about an axis %.4g from its centre, a turn in %u frames\n",
+                   dynamic->placement, dynamic->name.c_str(), dynamic->triangles.size(),
+                   100.0 * double(dynamic->triangles.size()) / double(tris), dynamic->path_radius, kFramesPerTurn);
+        out.printf("protocol: %dx%d, %d bounces, 1 first build, then per frame a move, a timed rebuild and a timed "
+                   "frame; %d frames (mean) after 1 warm-up at rest, threads %s\n",
+                   o.width, o.height, o.bounces, o.frames, thread_counts_text(o.threads).c_str());
+        return bench_dynamic(o, loaded, *dynamic, out);
+    }
+    out.printf("protocol: %dx%d, %d bounces, %d builds (min), %d frames (mean) after 1 warm-up, threads %s%s\n",
+               o.width, o.height, o.bounces, o.builds, o.frames, thread_counts_text(o.threads).c_str(),
+               std::count(o.tracers.begin(), o.tracers.end(), "stream")
+                   ? ("; stream batches of " + std::to_string(o.stream_paths) + " paths").c_str() : "");
+    return bench_static(o, loaded, out);
+}
+
+}  // namespace
+
+void run_bench(const std::vector<std::string>& scenes, const BenchOptions& o) {
+    const auto load = [&](const std::string& scene) -> SceneWork {
+        BenchOptions one = o;
+        one.scene = scene;
+        const std::shared_ptr<LoadedScene> loaded = load_bench_scene(one);
+        return [one, loaded](SceneReport& out) { return bench_scene(one, *loaded, out); };
+    };
+    const std::vector<nlohmann::json> results = run_per_scene(scenes, load);
+    distributed::checked([&] {
+        if (distributed::is_root()) write_json(results.size() == 1 ? results[0] : nlohmann::json{{"scenes", results}}, o.json_path);
+    });
+}
+
+void run_bench(const BenchOptions& o) { run_bench({o.scene}, o); }
 
 }  // namespace canopy

@@ -7,7 +7,7 @@
 namespace canopy {
 
 struct BenchOptions {
-    std::string scene;
+    std::string scene;  // the scene of run_bench(options); run_bench(scenes, options) sets it per scene
     std::vector<std::string> builders{"binned"};
     std::string start;  // start tree of the optimisers among the builders ("" for each one's default)
     std::vector<std::string> kernels{"auto"};
@@ -39,5 +39,8 @@ struct BenchOptions {
 // Runs ../shared/BENCHMARK.md's measurement for every requested accelerator in one process,
 // alternating between them build by build and frame by frame; prints the table, writes JSON.
 void run_bench(const BenchOptions& options);
+// The same for each scene in turn; under a job of several ranks, each scene on one rank (per_scene.h). The JSON
+// is the one scene's, or {"scenes": [each scene's]}; every row names the host that measured it.
+void run_bench(const std::vector<std::string>& scenes, const BenchOptions& options);
 
 }  // namespace canopy

@@ -5,6 +5,7 @@
 #include "renderer/commands/tradeoff.h"
 #include "renderer/commands/render.h"
 #include "renderer/commands/study.h"
+#include "renderer/distributed.h"
 
 #include <CLI/CLI.hpp>
 #include <tbb/global_control.h>
@@ -42,6 +43,7 @@ void keep_freed_memory() {
 }  // namespace
 
 int main(int argc, char** argv) {
+    distributed::Session session(argc, argv);  // a job of ranks under mpirun or srun, else this process alone
     keep_freed_memory();
     CLI::App app{"canopy: a CPU ray tracer with pluggable BVH builders, measured against Embree"};
     app.require_subcommand(1);
@@ -87,7 +89,9 @@ int main(int argc, char** argv) {
     std::vector<std::string> accels;
     std::vector<std::string> qualities{"medium"};
     CLI::App* bench = app.add_subcommand("bench", "Benchmark builders and kernels against Embree (BENCHMARK.md)");
-    bench->add_option("scene", b.scene, "Scene: scene.json, .obj, .gltf, .glb or gen:NAME?tris=N&seed=S")->required();
+    std::vector<std::string> bench_scenes;
+    bench->add_option("scenes", bench_scenes, "Scenes, each benched in turn: scene.json, .obj, .gltf, .glb or gen:NAME?tris=N&seed=S")
+        ->required();
     bench->add_option("--builder", b.builders, "Builders: " + builder_names())->delimiter(',')->capture_default_str();
     bench->add_option("--start", b.start, "Optimisers among the builders: builder of their start tree");
     bench->add_option("--toplevel", b.toplevels, "Top levels: flat, two-level (object BVHs under a BVH over instances), rebraid (Benthin 2017)")
@@ -176,7 +180,11 @@ int main(int argc, char** argv) {
     accuracy->add_option("--plot", ac.plot_path, "Write a PNG: distance error against coordinate magnitude");
     accuracy->add_option("--threads", threads, "Threads (0: all)")->check(CLI::Range(0, 4096));
 
-    CLI11_PARSE(app, argc, argv);
+    try {
+        app.parse(argc, argv);
+    } catch (const CLI::ParseError& e) {  // every rank parses the same arguments: one says what is wrong
+        return distributed::is_root() ? app.exit(e) : e.get_exit_code();
+    }
     std::optional<tbb::global_control> limit;
     if (threads > 0) limit.emplace(tbb::global_control::max_allowed_parallelism, size_t(threads));
     try {
@@ -184,25 +192,34 @@ int main(int argc, char** argv) {
             r.threads = threads;
             run_render(r);
         } else if (*accuracy) {
-            run_accuracy(ac);
+            if (distributed::is_root()) run_accuracy(ac);  // not split: under a job, rank 0's alone
         } else if (*tradeoff) {
             tr.width = tradeoff_size[0], tr.height = tradeoff_size[1];
             if (tradeoff_accels.empty()) tr.embree_qualities.clear();
             else if (tr.embree_qualities.empty()) tr.embree_qualities = {"medium"};
             run_tradeoff(tr);
         } else if (*study) {
-            for (const std::string& b : st.builders) find_builder(b);  // unknown names fail before any work
+            distributed::checked([&] {
+                for (const std::string& b : st.builders) find_builder(b);  // unknown names fail before any work
+            });
             st.width = study_size[0], st.height = study_size[1];
             run_study(st);
         } else {
             b.width = bench_size[0], b.height = bench_size[1];
             if (!accels.empty()) b.embree_qualities = qualities;
             if (dynamic_option->count()) b.dynamic = dynamic;
-            for (const std::string& blas : b.blas_builders) check_blas_builder(blas, b.toplevels);
-            run_bench(b);
+            distributed::checked([&] {
+                for (const std::string& blas : b.blas_builders) check_blas_builder(blas, b.toplevels);
+            });
+            run_bench(bench_scenes, b);
         }
+    } catch (const distributed::JobError& e) {  // known to every rank: rank 0 says it
+        if (distributed::is_root()) std::fprintf(stderr, "canopy: error: %s\n", e.what());
+        return 1;
     } catch (const std::exception& e) {
-        std::fprintf(stderr, "canopy: error: %s\n", e.what());
+        std::fprintf(stderr, "canopy: error: %s%s\n", e.what(), distributed::where().c_str());
+        // Other ranks may be waiting for this one: end them too.
+        if (distributed::ranks() > 1) distributed::abort_job(1);
         return 1;
     }
     return 0;

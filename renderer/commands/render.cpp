@@ -4,6 +4,8 @@
 #include "kernels/dispatch.h"
 #include "renderer/accelerator.h"
 #include "renderer/commands/heatmap.h"
+#include "renderer/distributed.h"
+#include "renderer/sample_sum.h"
 
 #include <unistd.h>
 
@@ -63,29 +65,51 @@ Scene load_scene_within_memory(const std::string& name, std::span<const BuildPla
     });
 }
 
-void run_render(RenderOptions o) {
+namespace {
+
+// What every rank of a render holds: the scene, and its own accelerator over it, built (replicated data).
+struct PreparedRender {
+    Scene scene;
+    FlatScene flat;
+    std::unique_ptr<Accelerator> accel;
+    double build_ms = 0;
+};
+
+void prepare_render(RenderOptions& o, PreparedRender& p) {
     check_blas_builder(o.blas_builder, {o.toplevel});
     if (!o.blas_builder.empty()) o.builder = o.blas_builder;  // a two-level render has no flat BVH
     const BuildPlan plan = o.accel == "embree" ? BuildPlan{"embree", 8, false}
                                                : BuildPlan{o.builder, kernel_width(o.kernel), o.toplevel != "flat"};
-    const Scene scene = load_scene_within_memory(o.scene, {&plan, 1}, o.memory_limit);
-    const FlatScene flat = flatten(scene);
-    std::unique_ptr<Accelerator> accel =
-        o.accel == "embree" ? make_embree_accelerator(flat, o.embree_quality, o.threads)
-                            : make_canopy_accelerator(scene, flat, {o.builder, o.start, o.kernel, o.traversal == "robust", o.intersector == "watertight", o.toplevel,
-                                                                   o.frames_planned ? o.frames_planned : o.spp,
-                                                                   uint64_t(o.size[0]) * uint64_t(o.size[1]),
-                                                                   parse_collapse_method(o.collapse)});
+    p.scene = load_scene_within_memory(o.scene, {&plan, 1}, o.memory_limit);
+    p.flat = flatten(p.scene);
+    p.accel = o.accel == "embree" ? make_embree_accelerator(p.flat, o.embree_quality, o.threads)
+                                  : make_canopy_accelerator(p.scene, p.flat, {o.builder, o.start, o.kernel, o.traversal == "robust", o.intersector == "watertight", o.toplevel,
+                                                                             o.frames_planned ? o.frames_planned : o.spp,
+                                                                             uint64_t(o.size[0]) * uint64_t(o.size[1]),
+                                                                             parse_collapse_method(o.collapse)});
     const auto start = std::chrono::steady_clock::now();
-    accel->prepare();
-    accel->build();
-    const double build_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
-    const PinholeCamera camera(scene_camera(scene, flat), o.size[0], o.size[1]);
-    if (o.heatmap) {
-        const HeatmapStats h = write_heatmap(*accel, camera, o.size[0], o.size[1], o.output);
-        std::printf("%s %s: per primary ray %.1f inner nodes, %.1f leaves, %.1f triangles; PNG top colour = cost %.0f -> %s\n",
-                    o.builder.c_str(), accel->kernel().c_str(), h.mean_inner, h.mean_leaves, h.mean_triangles,
-                    h.cost_p99, o.output.c_str());
+    p.accel->prepare();
+    p.accel->build();
+    p.build_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+}
+
+void render_heatmap(const RenderOptions& o, const Accelerator& accel, const PinholeCamera& camera) {
+    const HeatmapStats h = write_heatmap(accel, camera, o.size[0], o.size[1], o.output);
+    std::printf("%s %s: per primary ray %.1f inner nodes, %.1f leaves, %.1f triangles; PNG top colour = cost %.0f -> %s\n",
+                o.builder.c_str(), accel.kernel().c_str(), h.mean_inner, h.mean_leaves, h.mean_triangles,
+                h.cost_p99, o.output.c_str());
+}
+
+}  // namespace
+
+// Under a job of several ranks (distributed.h) the samples are split between them and summed on rank 0, which
+// writes the image; the image is the one process's, bit for bit (sample_sum.h).
+void run_render(RenderOptions o) {
+    PreparedRender p;
+    distributed::checked([&] { prepare_render(o, p); });
+    const PinholeCamera camera(scene_camera(p.scene, p.flat), o.size[0], o.size[1]);
+    if (o.heatmap) {  // one pass of primary rays: rank 0's alone
+        distributed::checked([&] { if (distributed::is_root()) render_heatmap(o, *p.accel, camera); });
         return;
     }
 
@@ -95,25 +119,25 @@ void run_render(RenderOptions o) {
     settings.tracer = o.tracer == "stream" ? TracerKind::Stream : TracerKind::Single;
     settings.stream_paths = o.stream_paths;
     settings.batch_traversal = parse_batch_traversal(o.batch_traversal);
-    const ShadingScene shading{flat, settings};
-    Image image(o.size[0], o.size[1]);
-    const bool terminal = isatty(fileno(stderr));
-    uint64_t rays = 0;
+    const ShadingScene shading{p.flat, settings};
+    // One bar, rank 0's, when its stderr is a terminal. Open MPI hands ranks their stderr as a pipe (and stdout as
+    // a terminal even when mpirun's output goes to a file), so under mpirun there is none.
+    const bool terminal = distributed::is_root() && isatty(fileno(stderr));
     const auto render_start = std::chrono::steady_clock::now();
-    for (int s = 0; s < o.spp; ++s) {
-        auto progress = [&](float f) { print_progress((float(s) + f) / float(o.spp)); };
-        rays += accel->render(shading, camera, uint32_t(s), image,
-                              terminal ? std::function<void(float)>(progress) : std::function<void(float)>());
-    }
+    const SampledImage image = render_samples(*p.accel, shading, camera, 0, o.spp, terminal ? print_progress : nullptr);
     if (terminal) std::fprintf(stderr, "\n");
     const double render_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - render_start).count();
-    write_exr(o.output, o.size[0], o.size[1], image.average(o.spp));
-    std::printf("%s: %zu triangles%s, %s build %.1f ms, %d spp in %.2f s (%.2f Mrays/s), mean %.5f -> %s\n",
-                o.scene.empty() ? "default scene" : o.scene.c_str(), flat.triangles.size(), instancing_summary(scene).c_str(),
+    distributed::checked([&] {
+        if (distributed::is_root()) write_exr(o.output, o.size[0], o.size[1], image.sums.average(o.spp));
+    });
+    if (!distributed::is_root()) return;
+    const std::string ranks = distributed::ranks() > 1 ? " on " + std::to_string(distributed::ranks()) + " ranks" : "";
+    std::printf("%s: %zu triangles%s, %s build %.1f ms, %d spp%s in %.2f s (%.2f Mrays/s), mean %.5f -> %s\n",
+                o.scene.empty() ? "default scene" : o.scene.c_str(), p.flat.triangles.size(), instancing_summary(p.scene).c_str(),
                 o.accel == "embree" ? ("embree " + o.embree_quality).c_str()
-                                     : (accel->builder() + (accel->chosen().empty() ? "" : " -> " + accel->chosen())).c_str(),
-                build_ms, o.spp,
-                render_s, double(rays) / render_s / 1e6, image.mean(o.spp), o.output.c_str());
+                                     : (p.accel->builder() + (p.accel->chosen().empty() ? "" : " -> " + p.accel->chosen())).c_str(),
+                p.build_ms, o.spp, ranks.c_str(), render_s, double(image.rays) / render_s / 1e6, image.sums.mean(o.spp),
+                o.output.c_str());
 }
 
 }  // namespace canopy

@@ -2,6 +2,8 @@
 
 #include "accel/builder.h"
 #include "renderer/accelerator.h"
+#include "renderer/distributed.h"
+#include "renderer/commands/per_scene.h"
 
 #include <OpenImageIO/imageio.h>
 #include <nlohmann/json.hpp>
@@ -10,6 +12,7 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <memory>
 #include <optional>
 
 namespace canopy {
@@ -17,6 +20,7 @@ namespace {
 
 struct Row {
     std::string builder;
+    std::string host;  // the machine that measured the row
     double scalar_sah = 0, scalar_epo = 0, scalar_ns = 0;       // binary tree, scalar kernel
     double sah = 0, epo = 0, lcv = 0, simd_ns = 0;              // the widest kernel's tree (binary, before collapse)
     double wide_sah = 0, wide_epo = 0;                          // the same tree collapsed to the kernel's width
@@ -214,43 +218,89 @@ double leaf_count_variability(const Accelerator& accel, const std::vector<Ray>& 
     return std::sqrt(std::max(0.0, sum2 / double(rays.size()) - mean * mean));
 }
 
-void run_study(const StudyOptions& o) {
-    std::vector<std::string> names = o.builders;
-    if (names.empty())
-        for (const BuilderEntry& b : builders()) names.push_back(b.name);
-    std::vector<SceneResult> results;
-    for (const std::string& scene_name : o.scenes) {
-        const Scene scene = load_scene(scene_name);
-        const FlatScene flat = flatten(scene);
-        const PinholeCamera camera(scene_camera(scene, flat), o.width, o.height);
-        auto reference = make_canopy_accelerator(flat, {"binned", "", "auto"});
-        reference->prepare();
-        reference->build();
-        const std::vector<Ray> rays = diffuse_rays(*reference, flat, camera, o.width, o.height);
-        std::printf("%s: %zu triangles, %zu diffuse rays (%dx%d, %d bounces)\n", scene_name.c_str(), flat.triangles.size(),
-                    rays.size(), o.width, o.height, FrameSettings{}.max_bounces);
-        SceneResult result{scene.name.empty() ? scene_name : scene.name, {}, {}, {}, {}, {}, {}};
-        for (const std::string& name : names) {
-            auto scalar = make_canopy_accelerator(flat, {name, "", "bvh2"});
-            auto simd = make_canopy_accelerator(flat, {name, "", "auto"});
-            for (Accelerator* a : {scalar.get(), simd.get()}) a->prepare(), a->build();
-            const AcceleratorReport rs = scalar->report(true), rw = simd->report(true);
-            Row row{name, *rs.sah, *rs.epo, ns_per_ray(*scalar, rays, o.repeats),
-                    *rw.sah, *rw.epo, leaf_count_variability(*simd, rays), ns_per_ray(*simd, rays, o.repeats),
-                    *rw.layout_sah, *rw.layout_epo};
-            std::printf("  %-8s scalar: SAH %7.2f EPO %7.2f %7.1f ns/ray | %s: SAH %7.2f EPO %7.2f LCV %6.2f %7.1f ns/ray\n",
-                        name.c_str(), row.scalar_sah, row.scalar_epo, row.scalar_ns, simd->kernel().c_str(), row.sah,
-                        row.epo, row.lcv, row.simd_ns);
-            std::fflush(stdout);  // a study takes minutes: show each row as it comes
-            result.rows.push_back(row);
-        }
-        result.scalar_sah = pearson(predicted(result.rows, true, 0, 0), measured(result.rows, true));
-        result.simd_sah = pearson(predicted(result.rows, false, 0, 0), measured(result.rows, false));
-        result.scalar_epo = best_fit(result.rows, true, false);
-        result.simd_epo = best_fit(result.rows, false, false);
-        result.simd_lcv = best_fit(result.rows, false, true);
-        results.push_back(result);
+namespace {
+
+nlohmann::json row_json(const Row& r) {
+    return {{"builder", r.builder}, {"host", r.host}, {"sah", r.sah}, {"epo", r.epo}, {"lcv", r.lcv},
+            {"scalar_ns_per_ray", r.scalar_ns}, {"simd_ns_per_ray", r.simd_ns},
+            {"scalar_sah", r.scalar_sah}, {"scalar_epo", r.scalar_epo},
+            {"wide_sah", r.wide_sah}, {"wide_epo", r.wide_epo}};
+}
+
+// JSON writes a NaN as null: read it back as one.
+double number(const nlohmann::json& j, const char* key) {
+    return j.at(key).is_null() ? std::nan("") : j.at(key).get<double>();
+}
+
+Row row_from_json(const nlohmann::json& j) {
+    return {j.at("builder"), j.at("host"), number(j, "scalar_sah"), number(j, "scalar_epo"), number(j, "scalar_ns_per_ray"),
+            number(j, "sah"), number(j, "epo"), number(j, "lcv"), number(j, "simd_ns_per_ray"), number(j, "wide_sah"),
+            number(j, "wide_epo")};
+}
+
+// One scene's rows, every builder's trees built and timed in this process.
+SceneResult study_scene(const std::string& scene_name, const Scene& scene, const FlatScene& flat,
+                        const std::vector<std::string>& names, const StudyOptions& o, SceneReport& report) {
+    const PinholeCamera camera(scene_camera(scene, flat), o.width, o.height);
+    auto reference = make_canopy_accelerator(flat, {"binned", "", "auto"});
+    reference->prepare();
+    reference->build();
+    const std::vector<Ray> rays = diffuse_rays(*reference, flat, camera, o.width, o.height);
+    report.printf("%s: %zu triangles, %zu diffuse rays (%dx%d, %d bounces)%s\n", scene_name.c_str(), flat.triangles.size(),
+                  rays.size(), o.width, o.height, FrameSettings{}.max_bounces, distributed::where().c_str());
+    SceneResult result{scene.name.empty() ? scene_name : scene.name, {}, {}, {}, {}, {}, {}};
+    for (const std::string& name : names) {
+        auto scalar = make_canopy_accelerator(flat, {name, "", "bvh2"});
+        auto simd = make_canopy_accelerator(flat, {name, "", "auto"});
+        for (Accelerator* a : {scalar.get(), simd.get()}) a->prepare(), a->build();
+        const AcceleratorReport rs = scalar->report(true), rw = simd->report(true);
+        Row row{name, distributed::host(), *rs.sah, *rs.epo, ns_per_ray(*scalar, rays, o.repeats),
+                *rw.sah, *rw.epo, leaf_count_variability(*simd, rays), ns_per_ray(*simd, rays, o.repeats),
+                *rw.layout_sah, *rw.layout_epo};
+        report.printf("  %-8s scalar: SAH %7.2f EPO %7.2f %7.1f ns/ray | %s: SAH %7.2f EPO %7.2f LCV %6.2f %7.1f ns/ray\n",
+                      name.c_str(), row.scalar_sah, row.scalar_epo, row.scalar_ns, simd->kernel().c_str(), row.sah,
+                      row.epo, row.lcv, row.simd_ns);
+        report.flush();  // a study takes minutes: show each row as it comes
+        result.rows.push_back(row);
     }
+    return result;
+}
+
+void fit(SceneResult& result) {
+    result.scalar_sah = pearson(predicted(result.rows, true, 0, 0), measured(result.rows, true));
+    result.simd_sah = pearson(predicted(result.rows, false, 0, 0), measured(result.rows, false));
+    result.scalar_epo = best_fit(result.rows, true, false);
+    result.simd_epo = best_fit(result.rows, false, false);
+    result.simd_lcv = best_fit(result.rows, false, true);
+}
+
+// Every scene's rows, on rank 0 (under a job, each scene measured by one rank: per_scene.h), and their fits.
+std::vector<SceneResult> study_scenes(const std::vector<std::string>& names, const StudyOptions& o) {
+    const auto load = [&](const std::string& scene_name) -> SceneWork {
+        const auto scene = std::make_shared<const Scene>(load_scene(scene_name));
+        const auto flat = std::make_shared<const FlatScene>(flatten(*scene));
+        return [&, scene_name, scene, flat](SceneReport& report) {
+            const SceneResult result = study_scene(scene_name, *scene, *flat, names, o, report);
+            nlohmann::json rows = nlohmann::json::array();
+            for (const Row& r : result.rows) rows.push_back(row_json(r));
+            return nlohmann::json{{"scene", result.scene}, {"rows", rows}};
+        };
+    };
+    std::vector<SceneResult> results;
+    for (const nlohmann::json& scene : run_per_scene(o.scenes, load)) {
+        SceneResult& r = results.emplace_back();
+        r.scene = scene.at("scene");
+        for (const nlohmann::json& row : scene.at("rows")) r.rows.push_back(row_from_json(row));
+        fit(r);
+    }
+    return results;
+}
+
+}  // namespace
+
+namespace {
+
+void report_study(const std::vector<SceneResult>& results, const StudyOptions& o) {
     const Fit fixed_scalar = fixed_fit(results, true, false), fixed_simd = fixed_fit(results, false, true);
     print_tables(results, fixed_scalar, fixed_simd);
     if (!o.plot_path.empty()) write_plot(results, o.plot_path), std::printf("wrote %s\n", o.plot_path.c_str());
@@ -258,11 +308,7 @@ void run_study(const StudyOptions& o) {
     nlohmann::json scenes = nlohmann::json::array();
     for (const SceneResult& s : results) {
         nlohmann::json rows = nlohmann::json::array();
-        for (const Row& r : s.rows)
-            rows.push_back({{"builder", r.builder}, {"sah", r.sah}, {"epo", r.epo}, {"lcv", r.lcv},
-                            {"scalar_ns_per_ray", r.scalar_ns}, {"simd_ns_per_ray", r.simd_ns},
-                            {"scalar_sah", r.scalar_sah}, {"scalar_epo", r.scalar_epo},
-                            {"wide_sah", r.wide_sah}, {"wide_epo", r.wide_epo}});
+        for (const Row& r : s.rows) rows.push_back(row_json(r));
         scenes.push_back({{"scene", s.scene}, {"builders", rows},
                           {"correlation", {{"sah", json_or_null(s.simd_sah)}, {"sah_epo", json_or_null(s.simd_epo.correlation)},
                                            {"sah_epo_lcv", json_or_null(s.simd_lcv.correlation)}}},
@@ -279,6 +325,18 @@ void run_study(const StudyOptions& o) {
     out << j.dump(2) << "\n";
     if (!out) throw std::runtime_error(o.json_path + ": cannot write the study JSON");
     std::printf("wrote %s\n", o.json_path.c_str());
+}
+
+}  // namespace
+
+void run_study(const StudyOptions& o) {
+    std::vector<std::string> names = o.builders;
+    if (names.empty())
+        for (const BuilderEntry& b : builders()) names.push_back(b.name);
+    const std::vector<SceneResult> results = study_scenes(names, o);
+    distributed::checked([&] {
+        if (distributed::is_root()) report_study(results, o);
+    });
 }
 
 }  // namespace canopy

@@ -1,6 +1,8 @@
 #include "renderer/commands/tradeoff.h"
 
 #include "renderer/accelerator.h"
+#include "renderer/distributed.h"
+#include "renderer/sample_sum.h"
 #include "renderer/image.h"
 #include "renderer/commands/plot.h"
 
@@ -53,21 +55,30 @@ std::string reference_path(const TradeoffOptions& o) {
     return o.output + ".reference-" + std::to_string(o.reference_spp) + "spp-" + hash + ".exr";
 }
 
+// The reference, rendered once and cached beside the outputs. Under a job of several ranks its samples are split
+// between them (sample_sum.h); rank 0 decides whether the cache holds it, and alone returns it.
 std::vector<float> converged_reference(const TradeoffOptions& o, const FlatScene& flat, const ShadingScene& shading,
                                        const PinholeCamera& camera) {
     const std::string path = reference_path(o);
-    if (std::filesystem::exists(path)) {
+    if (distributed::broadcast_from_root(std::filesystem::exists(path))) {
+        if (!distributed::is_root()) return {};
         std::printf("reference: %s (cached)\n", path.c_str());
         return read_exr(path, o.width, o.height);
     }
-    std::printf("reference: rendering %d spp with binned SAH into %s\n", o.reference_spp, path.c_str());
-    const auto accel = make_canopy_accelerator(flat, {"binned", "", o.kernel});
-    accel->prepare();
-    accel->build();
-    Image image(o.width, o.height);
-    for (int i = 0; i < o.reference_spp; ++i) accel->render(shading, camera, kReferenceFrameBase + uint32_t(i), image);
-    const std::vector<float> reference = image.average(o.reference_spp);
-    write_exr(path, o.width, o.height, reference);
+    if (distributed::is_root()) std::printf("reference: rendering %d spp with binned SAH into %s\n", o.reference_spp, path.c_str());
+    std::unique_ptr<Accelerator> accel;
+    distributed::checked([&] {
+        accel = make_canopy_accelerator(flat, {"binned", "", o.kernel});
+        accel->prepare();
+        accel->build();
+    });
+    const SampledImage image = render_samples(*accel, shading, camera, kReferenceFrameBase, o.reference_spp);
+    std::vector<float> reference;
+    distributed::checked([&] {
+        if (!distributed::is_root()) return;
+        reference = image.sums.average(o.reference_spp);
+        write_exr(path, o.width, o.height, reference);
+    });
     return reference;
 }
 
@@ -146,12 +157,18 @@ void write_outputs(const std::vector<Curve>& curves, const std::vector<double>& 
 
 }  // namespace
 
+// Under a job of several ranks, they share the reference's samples; the curves, which time one process, are
+// rank 0's alone.
 void run_tradeoff(const TradeoffOptions& o) {
-    const Scene scene = load_scene(o.scene);
-    const FlatScene flat = flatten(scene);
+    Scene scene;
+    FlatScene flat;
     std::vector<std::unique_ptr<Accelerator>> accels;  // made first, so bad names fail before any rendering
-    for (const std::string& builder : o.builders) accels.push_back(make_canopy_accelerator(flat, {builder, "", o.kernel}));
-    for (const std::string& quality : o.embree_qualities) accels.push_back(make_embree_accelerator(flat, quality, 0));
+    distributed::checked([&] {
+        scene = load_scene(o.scene);
+        flat = flatten(scene);
+        for (const std::string& builder : o.builders) accels.push_back(make_canopy_accelerator(flat, {builder, "", o.kernel}));
+        for (const std::string& quality : o.embree_qualities) accels.push_back(make_embree_accelerator(flat, quality, 0));
+    });
 
     FrameSettings settings;
     settings.width = o.width, settings.height = o.height, settings.max_bounces = o.bounces;
@@ -159,6 +176,7 @@ void run_tradeoff(const TradeoffOptions& o) {
     const ShadingScene shading{flat, settings};
     const PinholeCamera camera(scene_camera(scene, flat), o.width, o.height);
     const std::vector<float> reference = converged_reference(o, flat, shading, camera);
+    if (!distributed::is_root()) return;
 
     std::vector<Curve> curves;
     for (const auto& accel : accels) {
