@@ -112,6 +112,7 @@ public:
             settings_.start = options.start;
         }
         if (options.toplevel != "flat") {
+            if (options.permute_nodes) throw std::invalid_argument("permuted nodes: flat trees only, not top level '" + options.toplevel + "'");
             two_level_settings_.top = parse_top_level(options.toplevel);
             if (!objects) throw std::invalid_argument("top level '" + options.toplevel + "' needs the scene's objects");
             two_level_settings_.blas_builder = options.builder;
@@ -130,7 +131,8 @@ public:
     }
     std::string kernel() const override {
         const bool greedy = options_.collapse == CollapseMethod::Greedy && width_ > 2;  // at width 2 both agree
-        return kernel_name(width_) + (greedy ? " greedy" : "") + (options_.robust ? "" : " fast") + (options_.watertight ? "" : " mt");
+        return kernel_name(width_) + (greedy ? " greedy" : "") + (options_.robust ? "" : " fast") + (options_.watertight ? "" : " mt") +
+               (options_.permute_nodes ? " permuted" : "");
     }
     std::string quality() const override { return ""; }
 
@@ -169,6 +171,10 @@ public:
             case 4: collapse_into<4>(layout_, binary_, scene_.triangles, options_.collapse); break;
             default: collapse_into<8>(layout_, binary_, scene_.triangles, options_.collapse); break;
         }
+        if (options_.permute_nodes)
+            std::visit([&]<class Layout>(Layout& bvh) {
+                if constexpr (requires { permute_nodes(bvh, uint64_t{}); }) permute_nodes(bvh, *options_.permute_nodes);
+            }, layout_);
     }
 
     // Model of a rigid move: the placement's transform changes, its object tree does not (sec. 6.3 rebuilds

@@ -149,6 +149,9 @@ int main(int argc, char** argv) {
         ->expected(2)->check(CLI::Range(1, 16384))->capture_default_str();
     study->add_option("--repeats", st.repeats, "Timing passes per tree (fastest kept)")->check(CLI::Range(1, 100))->capture_default_str();
     study->add_option("--json", st.json_path, "Write results as JSON");
+    study->add_flag("--rotate", st.rotate, "Also each builder on the scene and rays rotated 45 degrees about (1, 1, 1) (sec. 4.4)");
+    study->add_flag("--permute-nodes", st.permute_nodes, "Also each SIMD tree with its nodes shuffled in memory (sec. 6)");
+    study->add_option("--permute-seed", st.permute_seed, "Seed of --permute-nodes' shuffle")->capture_default_str();
     study->add_option("--plot", st.plot_path, "Write a PNG: predicted (eq. 7) against measured SIMD ns/ray, a panel per scene");
 
     TradeoffOptions tr;
