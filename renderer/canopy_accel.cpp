@@ -10,6 +10,8 @@
 
 #include <tbb/enumerable_thread_specific.h>
 
+#include <cstdio>
+
 #include <variant>
 
 namespace canopy {
@@ -118,6 +120,10 @@ public:
             two_level_settings_.blas_builder = options.builder;
             two_level_settings_.blas = settings_;
             two_level_settings_.collapse = options.collapse;
+            if (!(options.rebraid_threshold >= 0.0f && options.rebraid_threshold <= 1.0f))
+                throw std::invalid_argument("rebraid threshold " + std::to_string(options.rebraid_threshold) +
+                                            ": a share of the segment's extent, from 0 to 1");
+            two_level_settings_.open_extent = options.rebraid_threshold;
             two_level_input_ = two_level_input(*objects);
         }
     }
@@ -127,7 +133,8 @@ public:
         const std::string name = builder_.default_start
                                      ? builder_.name + "<" + (settings_.start.empty() ? builder_.default_start : settings_.start)
                                      : builder_.name;
-        return two_level_input_ ? options_.toplevel + "/" + name : name;
+        if (!two_level_input_) return name;
+        return top_level_name() + "/" + name;
     }
     std::string kernel() const override {
         const bool greedy = options_.collapse == CollapseMethod::Greedy && width_ > 2;  // at width 2 both agree
@@ -135,6 +142,13 @@ public:
                (options_.permute_nodes ? " permuted" : "");
     }
     std::string quality() const override { return ""; }
+    // "rebraid@5%" for a re-braided top level with another than the paper's opening threshold.
+    std::string top_level_name() const {
+        if (options_.toplevel != "rebraid" || options_.rebraid_threshold == TwoLevelSettings{}.open_extent) return options_.toplevel;
+        char percent[32];
+        std::snprintf(percent, sizeof percent, "@%g%%", 100.0 * options_.rebraid_threshold);
+        return options_.toplevel + percent;
+    }
 
     void prepare() override {
         release();

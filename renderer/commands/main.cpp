@@ -96,6 +96,9 @@ int main(int argc, char** argv) {
     bench->add_option("--start", b.start, "Optimisers among the builders: builder of their start tree");
     bench->add_option("--toplevel", b.toplevels, "Top levels: flat, two-level (object BVHs under a BVH over instances), rebraid (Benthin 2017)")
         ->delimiter(',')->check(CLI::IsMember({"flat", "two-level", "rebraid"}))->capture_default_str();
+    CLI::Option* rebraid_option = bench->add_option("--rebraid-threshold", b.rebraid_thresholds,
+                      "Rebraid rows: open BRefs wider than this share of their segment's extent, 0 to 1 (sec. 4.2); a row each")
+        ->delimiter(',')->check(CLI::Range(0.0, 1.0))->capture_default_str();
     bench->add_option("--blas-builder", b.blas_builders,
                       "Two-level top levels: builders of the object BVHs, a row each (default: the --builder list)")
         ->delimiter(',');
@@ -213,6 +216,8 @@ int main(int argc, char** argv) {
             if (dynamic_option->count()) b.dynamic = dynamic;
             distributed::checked([&] {
                 for (const std::string& blas : b.blas_builders) check_blas_builder(blas, b.toplevels);
+                if (rebraid_option->count() && std::find(b.toplevels.begin(), b.toplevels.end(), "rebraid") == b.toplevels.end())
+                    throw std::invalid_argument("--rebraid-threshold: only with --toplevel rebraid");
             });
             run_bench(bench_scenes, b);
         }
