@@ -7,6 +7,8 @@
 #include <array>
 #include <bit>
 #include <limits>
+#include <numeric>
+#include <random>
 #include <stdexcept>
 
 namespace canopy {
@@ -616,6 +618,27 @@ WideBvh<N> collapse(const Bvh& bvh, std::span<const Triangle> triangles, Collaps
     return out;
 }
 
+template <int N>
+void permute_nodes(WideBvh<N>& tree, uint64_t seed) {
+    const size_t count = tree.nodes.size();
+    if (count < 3) return;
+    std::vector<uint32_t> place(count);  // place[old index] = new index; the root stays first
+    std::iota(place.begin(), place.end(), 0u);
+    std::mt19937_64 rng(seed);
+    std::shuffle(place.begin() + 1, place.end(), rng);
+    WideNodes<N> moved(count);
+    for (size_t old = 0; old < count; ++old) {
+        WideNode<N> node = tree.nodes[old];
+        for (int i = 0; i < N; ++i)
+            if (!node.is_empty(i) && !node.is_leaf(i)) node.child[i] = place[node.child[i]];
+        moved[place[old]] = node;
+    }
+    tree.nodes = std::move(moved);
+}
+
+template void permute_nodes<2>(WideBvh<2>&, uint64_t);
+template void permute_nodes<4>(WideBvh<4>&, uint64_t);
+template void permute_nodes<8>(WideBvh<8>&, uint64_t);
 template std::vector<LeafRun> collapse_nodes<2>(const Bvh&, WideNodes<2>&, const PlaneFrame&, uint32_t (*)(int, uint32_t), uint32_t&);
 template std::vector<LeafRun> collapse_nodes<4>(const Bvh&, WideNodes<4>&, const PlaneFrame&, uint32_t (*)(int, uint32_t), uint32_t&);
 template std::vector<LeafRun> collapse_nodes<8>(const Bvh&, WideNodes<8>&, const PlaneFrame&, uint32_t (*)(int, uint32_t), uint32_t&);

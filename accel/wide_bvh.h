@@ -173,6 +173,11 @@ template <int N>
 WideBvh<N> collapse(const Bvh& bvh, std::span<const Triangle> triangles, CollapseMethod method = CollapseMethod::Optimal,
                     std::optional<Vec3> origin = {});
 
+// The same tree with nodes 1.. in a random order in memory, fixed by `seed`, and every inner child re-pointed:
+// the node-order experiment of Aila, Karras and Laine 2013, sec. 6 (leaves stay where they are).
+template <int N>
+void permute_nodes(WideBvh<N>& tree, uint64_t seed);
+
 // A leaf of a wide tree: its first entry in the tree's leaf array, and the binary leaf's refs it is made of.
 struct LeafRun {
     uint32_t first_entry, first_ref, count;

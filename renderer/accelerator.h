@@ -85,6 +85,11 @@ struct CanopyOptions {
     int frames_planned = 16;
     uint64_t pixels = 1024 * 768;
     CollapseMethod collapse = CollapseMethod::Optimal;  // of the binary tree into the wide layout (bvh4, bvh8)
+    // Flat trees: the layout's nodes shuffled in memory with this seed after the build (permute_nodes, untimed
+    // study experiment); the tree and every answer stay the same.
+    std::optional<uint64_t> permute_nodes;
+    // rebraid: open BRefs wider than this share of their segment's largest extent (Benthin et al. 2017, sec. 4.2).
+    float rebraid_threshold = TwoLevelSettings{}.open_extent;
 };
 
 // Throws std::invalid_argument for an unknown builder or kernel, or a two-level top level (it needs the scene).

@@ -10,6 +10,8 @@
 
 #include <tbb/enumerable_thread_specific.h>
 
+#include <cstdio>
+
 #include <variant>
 
 namespace canopy {
@@ -112,11 +114,16 @@ public:
             settings_.start = options.start;
         }
         if (options.toplevel != "flat") {
+            if (options.permute_nodes) throw std::invalid_argument("permuted nodes: flat trees only, not top level '" + options.toplevel + "'");
             two_level_settings_.top = parse_top_level(options.toplevel);
             if (!objects) throw std::invalid_argument("top level '" + options.toplevel + "' needs the scene's objects");
             two_level_settings_.blas_builder = options.builder;
             two_level_settings_.blas = settings_;
             two_level_settings_.collapse = options.collapse;
+            if (!(options.rebraid_threshold >= 0.0f && options.rebraid_threshold <= 1.0f))
+                throw std::invalid_argument("rebraid threshold " + std::to_string(options.rebraid_threshold) +
+                                            ": a share of the segment's extent, from 0 to 1");
+            two_level_settings_.open_extent = options.rebraid_threshold;
             two_level_input_ = two_level_input(*objects);
         }
     }
@@ -126,13 +133,22 @@ public:
         const std::string name = builder_.default_start
                                      ? builder_.name + "<" + (settings_.start.empty() ? builder_.default_start : settings_.start)
                                      : builder_.name;
-        return two_level_input_ ? options_.toplevel + "/" + name : name;
+        if (!two_level_input_) return name;
+        return top_level_name() + "/" + name;
     }
     std::string kernel() const override {
         const bool greedy = options_.collapse == CollapseMethod::Greedy && width_ > 2;  // at width 2 both agree
-        return kernel_name(width_) + (greedy ? " greedy" : "") + (options_.robust ? "" : " fast") + (options_.watertight ? "" : " mt");
+        return kernel_name(width_) + (greedy ? " greedy" : "") + (options_.robust ? "" : " fast") + (options_.watertight ? "" : " mt") +
+               (options_.permute_nodes ? " permuted" : "");
     }
     std::string quality() const override { return ""; }
+    // "rebraid@5%" for a re-braided top level with another than the paper's opening threshold.
+    std::string top_level_name() const {
+        if (options_.toplevel != "rebraid" || options_.rebraid_threshold == TwoLevelSettings{}.open_extent) return options_.toplevel;
+        char percent[32];
+        std::snprintf(percent, sizeof percent, "@%g%%", 100.0 * options_.rebraid_threshold);
+        return options_.toplevel + percent;
+    }
 
     void prepare() override {
         release();
@@ -169,6 +185,10 @@ public:
             case 4: collapse_into<4>(layout_, binary_, scene_.triangles, options_.collapse); break;
             default: collapse_into<8>(layout_, binary_, scene_.triangles, options_.collapse); break;
         }
+        if (options_.permute_nodes)
+            std::visit([&]<class Layout>(Layout& bvh) {
+                if constexpr (requires { permute_nodes(bvh, uint64_t{}); }) permute_nodes(bvh, *options_.permute_nodes);
+            }, layout_);
     }
 
     // Model of a rigid move: the placement's transform changes, its object tree does not (sec. 6.3 rebuilds

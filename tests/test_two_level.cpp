@@ -35,6 +35,28 @@ TEST_CASE("every top level agrees with brute force over instanced, transformed o
     CHECK(disagreements(*embree, rays, expected, 1e-5f * glm::length(flat.bounds.extent())) <= rays.size() / 1000);
 }
 
+TEST_CASE("re-braiding agrees with brute force at every opening threshold, and opens more BRefs at a lower one", "[two-level]") {
+    const Scene scene = instanced_scene();
+    const FlatScene flat = flatten(scene);
+    const std::vector<Ray> rays = random_rays(flat.triangles, 20000, 78);
+    const std::vector<Hit> expected = brute_force_all(flat.triangles, rays);
+    std::vector<uint64_t> brefs;
+    for (const float threshold : {1.0f, 0.1f, 0.0f}) {
+        CanopyOptions options{"binned", "", "auto", true, true, "rebraid"};
+        options.rebraid_threshold = threshold;
+        auto accel = make_canopy_accelerator(scene, flat, options);
+        accel->prepare();
+        accel->build();
+        INFO("threshold " << threshold);
+        CHECK(disagreements(*accel, rays, expected, 1e-5f * glm::length(flat.bounds.extent())) <= rays.size() / 1000);
+        brefs.push_back(*accel->report(false).brefs);
+    }
+    CHECK(brefs[0] < brefs[2]);
+    CanopyOptions out_of_range{"binned", "", "auto", true, true, "rebraid"};
+    out_of_range.rebraid_threshold = 1.5f;
+    CHECK_THROWS_WITH(make_canopy_accelerator(scene, flat, out_of_range), Catch::Contains("from 0 to 1"));
+}
+
 TEST_CASE("identity instances give exactly the flat BVH's hits", "[two-level]") {
     const Scene scene = load_scene("gen:box?tris=3000&seed=9");  // several objects, one identity instance
     const FlatScene flat = flatten(scene);

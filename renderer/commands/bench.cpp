@@ -55,6 +55,7 @@ struct Entry {
     std::string thread_tag;  // " 2 threads" in labels when the bench compares thread counts, else empty
     std::optional<TraversalCounts> visits;  // canopy: the first timed frame's rays through the counting kernel
     uint64_t counted_rays = 0;
+    std::optional<float> rebraid_threshold;  // canopy's rebraid rows
 
     double build_min() const { return *std::min_element(build_ms.begin(), build_ms.end()); }
     double frame_mean() const { return mean(frame_ms); }
@@ -143,6 +144,11 @@ std::string threads_text(int threads) {
     return std::to_string(threads) + (threads == 1 ? " thread" : " threads");
 }
 
+// The opening thresholds of a top level's rows: rebraid's list, one row for the others.
+std::vector<float> rebraid_thresholds_of(const std::string& toplevel, const BenchOptions& o) {
+    return toplevel == "rebraid" ? o.rebraid_thresholds : std::vector<float>{TwoLevelSettings{}.open_extent};
+}
+
 std::vector<Entry> make_entries(const Scene& scene, const FlatScene& flat, const BenchOptions& o, int threads) {
     std::vector<Entry> entries;
     const uint64_t pixels = uint64_t(o.width) * uint64_t(o.height);
@@ -158,7 +164,11 @@ std::vector<Entry> make_entries(const Scene& scene, const FlatScene& flat, const
                                                   traversal == "robust", intersector == "watertight", toplevel};
                             options.collapse = parse_collapse_method(collapse);
                             if (builder != "auto") {
-                                entries.push_back({make_canopy_accelerator(scene, flat, options)});
+                                for (const float threshold : rebraid_thresholds_of(toplevel, o)) {
+                                    options.rebraid_threshold = threshold;
+                                    entries.push_back({make_canopy_accelerator(scene, flat, options)});
+                                    if (toplevel == "rebraid") entries.back().rebraid_threshold = threshold;
+                                }
                                 continue;
                             }
                             if (toplevel != o.toplevels.front()) continue;  // auto chooses the top level itself
@@ -288,6 +298,7 @@ nlohmann::json results_json(const std::vector<Entry>& entries, uint64_t tris) {
                            {"quality", canopy ? nlohmann::json(nullptr) : nlohmann::json(e.accel->quality())},
                            {"tracer", tracer_name(e.tracer)},
                            {"threads", e.threads},
+                           {"rebraid_threshold", or_null(e.rebraid_threshold)},
                            {"batch_traversal", e.tracer != TracerKind::Stream ? nlohmann::json(nullptr)
                                                : canopy ? nlohmann::json(batch_traversal_name(e.settings.batch_traversal))
                                                : nlohmann::json(e.settings.embree_packets ? "rtcIntersect16" : "rtcIntersect1M")},
@@ -442,6 +453,7 @@ nlohmann::json dynamic_json(const std::vector<Entry>& entries, const BenchOption
                            {"builder", canopy ? nlohmann::json(e.accel->builder()) : nlohmann::json(nullptr)},
                            {"kernel", canopy ? nlohmann::json(e.accel->kernel()) : nlohmann::json(nullptr)},
                            {"quality", canopy ? nlohmann::json(nullptr) : nlohmann::json(e.accel->quality())},
+                           {"rebraid_threshold", or_null(e.rebraid_threshold)},
                            {"first_build_ms", e.build_min()},
                            {"rebuild_ms_mean", e.rebuild_mean()},
                            {"rebuild_ms_median", median(e.rebuild_ms)},

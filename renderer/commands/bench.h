@@ -1,4 +1,6 @@
 #pragma once
+#include "accel/two_level.h"
+
 #include <cstdint>
 #include <optional>
 #include <string>
@@ -12,6 +14,7 @@ struct BenchOptions {
     std::string start;  // start tree of the optimisers among the builders ("" for each one's default)
     std::vector<std::string> kernels{"auto"};
     std::vector<std::string> toplevels{"flat"};  // flat, two-level, rebraid
+    std::vector<float> rebraid_thresholds{TwoLevelSettings().open_extent};  // a rebraid row each (sec. 4.2, Fig. 4)
     std::vector<std::string> blas_builders;  // object BVH builders of the two-level rows; empty: `builders`
     std::vector<std::string> traversals{"robust"};      // robust, fast
     std::vector<std::string> intersectors{"watertight"};  // watertight, moller

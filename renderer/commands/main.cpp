@@ -96,6 +96,9 @@ int main(int argc, char** argv) {
     bench->add_option("--start", b.start, "Optimisers among the builders: builder of their start tree");
     bench->add_option("--toplevel", b.toplevels, "Top levels: flat, two-level (object BVHs under a BVH over instances), rebraid (Benthin 2017)")
         ->delimiter(',')->check(CLI::IsMember({"flat", "two-level", "rebraid"}))->capture_default_str();
+    CLI::Option* rebraid_option = bench->add_option("--rebraid-threshold", b.rebraid_thresholds,
+                      "Rebraid rows: open BRefs wider than this share of their segment's extent, 0 to 1 (sec. 4.2); a row each")
+        ->delimiter(',')->check(CLI::Range(0.0, 1.0))->capture_default_str();
     bench->add_option("--blas-builder", b.blas_builders,
                       "Two-level top levels: builders of the object BVHs, a row each (default: the --builder list)")
         ->delimiter(',');
@@ -149,6 +152,9 @@ int main(int argc, char** argv) {
         ->expected(2)->check(CLI::Range(1, 16384))->capture_default_str();
     study->add_option("--repeats", st.repeats, "Timing passes per tree (fastest kept)")->check(CLI::Range(1, 100))->capture_default_str();
     study->add_option("--json", st.json_path, "Write results as JSON");
+    study->add_flag("--rotate", st.rotate, "Also each builder on the scene and rays rotated 45 degrees about (1, 1, 1) (sec. 4.4)");
+    study->add_flag("--permute-nodes", st.permute_nodes, "Also each SIMD tree with its nodes shuffled in memory (sec. 6)");
+    study->add_option("--permute-seed", st.permute_seed, "Seed of --permute-nodes' shuffle")->capture_default_str();
     study->add_option("--plot", st.plot_path, "Write a PNG: predicted (eq. 7) against measured SIMD ns/ray, a panel per scene");
 
     TradeoffOptions tr;
@@ -210,6 +216,8 @@ int main(int argc, char** argv) {
             if (dynamic_option->count()) b.dynamic = dynamic;
             distributed::checked([&] {
                 for (const std::string& blas : b.blas_builders) check_blas_builder(blas, b.toplevels);
+                if (rebraid_option->count() && std::find(b.toplevels.begin(), b.toplevels.end(), "rebraid") == b.toplevels.end())
+                    throw std::invalid_argument("--rebraid-threshold: only with --toplevel rebraid");
             });
             run_bench(bench_scenes, b);
         }

@@ -6,6 +6,7 @@
 #include "renderer/commands/per_scene.h"
 
 #include <OpenImageIO/imageio.h>
+#include <glm/gtc/matrix_transform.hpp>
 #include <nlohmann/json.hpp>
 
 #include <chrono>
@@ -24,6 +25,27 @@ struct Row {
     double scalar_sah = 0, scalar_epo = 0, scalar_ns = 0;       // binary tree, scalar kernel
     double sah = 0, epo = 0, lcv = 0, simd_ns = 0;              // the widest kernel's tree (binary, before collapse)
     double wide_sah = 0, wide_epo = 0;                          // the same tree collapsed to the kernel's width
+    // --rotate (sec. 4.4): the widest kernel's tree of the rotated scene, traced with the rotated rays; NaN if not run.
+    double rotated_sah = std::nan(""), rotated_epo = std::nan(""), rotated_lcv = std::nan(""), rotated_ns = std::nan("");
+    double permuted_ns = std::nan("");  // --permute-nodes (sec. 6): the same SIMD tree, its nodes shuffled in memory
+};
+
+// Sec. 4.4: 45 degrees about the (1, 1, 1) axis, here through the scene's centre so the scene stays in view.
+struct Rotation {
+    glm::mat3 turn = glm::mat3(glm::rotate(glm::mat4(1.0f), glm::radians(45.0f), glm::normalize(Vec3(1.0f))));
+    Vec3 pivot;
+
+    Vec3 point(const Vec3& p) const { return pivot + turn * (p - pivot); }
+    Ray ray(const Ray& r) const { return {point(r.org), turn * r.dir, r.tmin, r.tmax}; }
+    FlatScene scene(const FlatScene& flat) const {
+        FlatScene rotated = flat;
+        rotated.bounds = BBox{};
+        for (Triangle& t : rotated.triangles) {
+            t = {point(t.v0), point(t.v1), point(t.v2)};
+            rotated.bounds.extend(BBox::of(t));
+        }
+        return rotated;
+    }
 };
 
 // Records every ray a tracer is asked for, and answers with the accelerator's hit.
@@ -173,6 +195,54 @@ void print_tables(const std::vector<SceneResult>& results, const Fit& fixed_scal
                 corr(fixed_simd.correlation).c_str());
 }
 
+double percent_change(double after, double before) { return 100.0 * (after / before - 1.0); }
+
+// Sec. 4.4's composite estimate: eq. 6 with the paper's average SIMD alpha (0.50), on costs relative to the
+// unrotated tree's, so that SAH and EPO weigh by their change, not their scale.
+constexpr double kPaperSimdAlpha = 0.50;
+double composite_change(const Row& r) {
+    return 100.0 * ((1.0 - kPaperSimdAlpha) * r.rotated_sah / r.sah + kPaperSimdAlpha * r.rotated_epo / r.epo - 1.0);
+}
+
+// Sec. 4.4: what rotating scene and rays 45 degrees about (1, 1, 1) costs each builder, measured and predicted.
+void print_rotation_table(const std::vector<SceneResult>& results) {
+    std::printf("\nSec. 4.4: scene and rays rotated 45 degrees about (1, 1, 1), change against the unrotated tree\n");
+    std::printf("%-34s %-10s %10s %8s %8s %8s %11s\n", "scene", "builder", "SIMD time", "SAH", "EPO", "LCV", "eq. 6 a=.5");
+    double time = 0, sah = 0, epo = 0, composite = 0;
+    int n = 0;
+    for (const SceneResult& s : results)
+        for (const Row& r : s.rows) {
+            if (std::isnan(r.rotated_ns)) continue;
+            std::printf("%-34s %-10s %+9.1f%% %+7.1f%% %+7.1f%% %+7.1f%% %+10.1f%%\n", s.scene.c_str(), r.builder.c_str(),
+                        percent_change(r.rotated_ns, r.simd_ns), percent_change(r.rotated_sah, r.sah),
+                        percent_change(r.rotated_epo, r.epo), percent_change(r.rotated_lcv, r.lcv), composite_change(r));
+            time += percent_change(r.rotated_ns, r.simd_ns), sah += percent_change(r.rotated_sah, r.sah);
+            epo += percent_change(r.rotated_epo, r.epo), composite += composite_change(r), ++n;
+        }
+    if (!n) return;
+    std::printf("%-45s %+9.1f%% %+7.1f%% %+7.1f%% %8s %+10.1f%%\n", "average", time / n, sah / n, epo / n, "", composite / n);
+    std::printf("paper (22 scenes, GPU SIMD): time +168%% (+90%% SBVH and STreelet, +250%% Agglo), SAH under +10%% for "
+                "SBVH and STreelet and +50%% for the others, EPO +290%%, eq. 6 with a = 0.50 +165%%\n");
+}
+
+// Sec. 6: the same trees with their nodes shuffled in memory.
+void print_permutation_table(const std::vector<SceneResult>& results) {
+    std::printf("\nSec. 6: wide nodes permuted at random in memory, SIMD time against the builder's own node order\n");
+    std::printf("%-34s %-10s %10s %10s %10s\n", "scene", "builder", "ns/ray", "permuted", "change");
+    double sum = 0;
+    int n = 0;
+    for (const SceneResult& s : results)
+        for (const Row& r : s.rows) {
+            if (std::isnan(r.permuted_ns)) continue;
+            std::printf("%-34s %-10s %10.1f %10.1f %+9.1f%%\n", s.scene.c_str(), r.builder.c_str(), r.simd_ns,
+                        r.permuted_ns, percent_change(r.permuted_ns, r.simd_ns));
+            sum += percent_change(r.permuted_ns, r.simd_ns), ++n;
+        }
+    if (!n) return;
+    std::printf("%-45s %21s %+9.1f%%\n", "average", "", sum / n);
+    std::printf("paper (GPU): under 1%% change\n");
+}
+
 // One panel per scene: predicted SIMD cost (eq. 7 with the scene's fit) against measured SIMD ns/ray,
 // both scaled to the panel, one white square per builder, on a grey diagonal.
 void write_plot(const std::vector<SceneResult>& results, const std::string& path) {
@@ -224,7 +294,9 @@ nlohmann::json row_json(const Row& r) {
     return {{"builder", r.builder}, {"host", r.host}, {"sah", r.sah}, {"epo", r.epo}, {"lcv", r.lcv},
             {"scalar_ns_per_ray", r.scalar_ns}, {"simd_ns_per_ray", r.simd_ns},
             {"scalar_sah", r.scalar_sah}, {"scalar_epo", r.scalar_epo},
-            {"wide_sah", r.wide_sah}, {"wide_epo", r.wide_epo}};
+            {"wide_sah", r.wide_sah}, {"wide_epo", r.wide_epo},
+            {"rotated_sah", r.rotated_sah}, {"rotated_epo", r.rotated_epo}, {"rotated_lcv", r.rotated_lcv},
+            {"rotated_simd_ns_per_ray", r.rotated_ns}, {"permuted_simd_ns_per_ray", r.permuted_ns}};
 }
 
 // JSON writes a NaN as null: read it back as one.
@@ -235,7 +307,33 @@ double number(const nlohmann::json& j, const char* key) {
 Row row_from_json(const nlohmann::json& j) {
     return {j.at("builder"), j.at("host"), number(j, "scalar_sah"), number(j, "scalar_epo"), number(j, "scalar_ns_per_ray"),
             number(j, "sah"), number(j, "epo"), number(j, "lcv"), number(j, "simd_ns_per_ray"), number(j, "wide_sah"),
-            number(j, "wide_epo")};
+            number(j, "wide_epo"), number(j, "rotated_sah"), number(j, "rotated_epo"), number(j, "rotated_lcv"),
+            number(j, "rotated_simd_ns_per_ray"), number(j, "permuted_simd_ns_per_ray")};
+}
+
+// Sec. 4.4: the row's builder on the rotated scene, its SIMD tree timed with the rotated rays.
+void measure_rotated(Row& row, const FlatScene& rotated, const std::vector<Ray>& rays, const StudyOptions& o,
+                     SceneReport& report) {
+    auto simd = make_canopy_accelerator(rotated, {row.builder, "", "auto"});
+    simd->prepare(), simd->build();
+    const AcceleratorReport r = simd->report(true);
+    row.rotated_sah = *r.sah, row.rotated_epo = *r.epo;
+    row.rotated_lcv = leaf_count_variability(*simd, rays);
+    row.rotated_ns = ns_per_ray(*simd, rays, o.repeats);
+    report.printf("  %-8s rotated 45 degrees about (1, 1, 1): SAH %7.2f EPO %7.2f LCV %6.2f %7.1f ns/ray\n",
+                  row.builder.c_str(), row.rotated_sah, row.rotated_epo, row.rotated_lcv, row.rotated_ns);
+}
+
+// Sec. 6: the row's SIMD tree again, its nodes shuffled in memory, timed with the same rays.
+void measure_permuted(Row& row, const FlatScene& flat, const std::vector<Ray>& rays, const StudyOptions& o,
+                      SceneReport& report) {
+    CanopyOptions options{row.builder, "", "auto"};
+    options.permute_nodes = o.permute_seed;
+    auto simd = make_canopy_accelerator(flat, options);
+    simd->prepare(), simd->build();
+    row.permuted_ns = ns_per_ray(*simd, rays, o.repeats);
+    report.printf("  %-8s nodes permuted in memory (seed %llu): %7.1f ns/ray\n", row.builder.c_str(),
+                  (unsigned long long)o.permute_seed, row.permuted_ns);
 }
 
 // One scene's rows, every builder's trees built and timed in this process.
@@ -249,6 +347,11 @@ SceneResult study_scene(const std::string& scene_name, const Scene& scene, const
     report.printf("%s: %zu triangles, %zu diffuse rays (%dx%d, %d bounces)%s\n", scene_name.c_str(), flat.triangles.size(),
                   rays.size(), o.width, o.height, FrameSettings{}.max_bounces, distributed::where().c_str());
     SceneResult result{scene.name.empty() ? scene_name : scene.name, {}, {}, {}, {}, {}, {}};
+    const Rotation rotation{.pivot = flat.bounds.center()};
+    const std::optional<FlatScene> rotated = o.rotate ? std::optional(rotation.scene(flat)) : std::nullopt;
+    std::vector<Ray> rotated_rays;
+    if (o.rotate)
+        for (const Ray& ray : rays) rotated_rays.push_back(rotation.ray(ray));
     for (const std::string& name : names) {
         auto scalar = make_canopy_accelerator(flat, {name, "", "bvh2"});
         auto simd = make_canopy_accelerator(flat, {name, "", "auto"});
@@ -260,6 +363,8 @@ SceneResult study_scene(const std::string& scene_name, const Scene& scene, const
         report.printf("  %-8s scalar: SAH %7.2f EPO %7.2f %7.1f ns/ray | %s: SAH %7.2f EPO %7.2f LCV %6.2f %7.1f ns/ray\n",
                       name.c_str(), row.scalar_sah, row.scalar_epo, row.scalar_ns, simd->kernel().c_str(), row.sah,
                       row.epo, row.lcv, row.simd_ns);
+        if (rotated) measure_rotated(row, *rotated, rotated_rays, o, report);
+        if (o.permute_nodes) measure_permuted(row, flat, rays, o, report);
         report.flush();  // a study takes minutes: show each row as it comes
         result.rows.push_back(row);
     }
@@ -303,6 +408,8 @@ namespace {
 void report_study(const std::vector<SceneResult>& results, const StudyOptions& o) {
     const Fit fixed_scalar = fixed_fit(results, true, false), fixed_simd = fixed_fit(results, false, true);
     print_tables(results, fixed_scalar, fixed_simd);
+    if (o.rotate) print_rotation_table(results);
+    if (o.permute_nodes) print_permutation_table(results);
     if (!o.plot_path.empty()) write_plot(results, o.plot_path), std::printf("wrote %s\n", o.plot_path.c_str());
     if (o.json_path.empty()) return;
     nlohmann::json scenes = nlohmann::json::array();

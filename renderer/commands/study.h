@@ -13,6 +13,9 @@ struct StudyOptions {
     int width = 256, height = 192;      // resolution of the frame whose diffuse rays are timed
     int repeats = 3;                    // timings per tree; the fastest is kept
     std::string json_path, plot_path;
+    bool rotate = false;         // also the scene and rays turned 45 degrees about (1, 1, 1) (sec. 4.4)
+    bool permute_nodes = false;  // also each SIMD tree with its nodes shuffled in memory (sec. 6)
+    uint64_t permute_seed = 1;
 };
 
 void run_study(const StudyOptions& options);
