@@ -37,8 +37,26 @@ struct BuilderEntry {
 };
 
 const std::vector<BuilderEntry>& builders();
-// Throws InputError-like std::invalid_argument listing the known names when `name` is unknown.
+// Throws InputError-like std::invalid_argument listing the known names when `name` is unknown, or saying what
+// `name` builds when it names another structure family.
 const BuilderEntry& find_builder(const std::string& name);
+
+// Acceleration structures other than the BVH (the kd-tree), each built and traced by an accelerator of its own
+// (make_canopy_accelerator routes their names there). A third family is a line here and a line there.
+struct FamilyEntry {
+    std::string name, description;
+    std::string structure;  // what it builds, for errors: "kd-tree"
+};
+const std::vector<FamilyEntry>& other_families();
+
+// Every name `--builder` takes, with its description: builders(), then other_families().
+struct BuilderName {
+    std::string name, description;
+};
+std::vector<BuilderName> all_builders();
+bool is_bvh_builder(const std::string& name);
+// Throws std::invalid_argument listing every name when `name` is neither a BVH builder nor another family.
+void check_builder_name(const std::string& name);
 
 // The start tree of an optimiser: built by settings.start, or by `default_start` when that is empty. The start
 // builder sees the same settings with no start of its own, so optimisers chain but never recurse.

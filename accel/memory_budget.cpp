@@ -5,6 +5,7 @@
 #include "accel/builders/sbvh.h"
 #include "accel/builders/split_partitioning.h"
 #include "accel/bvh.h"
+#include "accel/kdtree.h"
 #include "accel/wide_bvh.h"
 
 #include <algorithm>
@@ -40,6 +41,13 @@ constexpr uint64_t leaf_bytes_per_reference(int width) {
     if (width == 2) return sizeof(LeafTriangle);
     return 2 * sizeof(LeafOf<8>) / uint64_t(block_lanes(8));
 }
+// The kd-tree's build (accel/kdtree.cpp) per reference: six 12-byte events in a node's list, in the copy kept
+// for a child and in the child's merged list; the clipped box and triangle index in the node and in a child; the
+// index maps and side flag of the partition.
+constexpr uint64_t kKdBuildBytesPerReference = 3 * 6 * 12 + 2 * (sizeof(BBox) + sizeof(uint32_t)) + 2 * sizeof(uint32_t) + 1;
+// The kd-tree itself per reference: its leaf triangle, the build's reference, and nodes: a leaf per reference at
+// most, with the inner node above it, and as many again for the empty leaves the empty-space bonus cuts off.
+constexpr uint64_t kKdTreeBytesPerReference = sizeof(KdTriangle) + sizeof(uint32_t) + 4 * sizeof(KdNode);
 // A two-level placement: its inverse and world transforms, and the top level's BRefs (re-braiding opens a
 // placement into a bounded number of them) with their share of top-level nodes.
 constexpr uint64_t kPlacementBytes = 1024;
@@ -56,6 +64,7 @@ const ReferenceCap kReferenceCaps[] = {
     {"streelet", 1.3},      // streelet.cpp: a 30% pre-split quota
     {"bonsai-split", kMaxReferenceCapacity},
     {"sweep-presplit", kMaxReferenceCapacity},
+    {kKdTreeName, KdSettings{}.max_references_per_triangle},
 };
 
 // The builders `--builder auto` chooses from (renderer/auto_builder.cpp): its estimate is the largest of theirs.
@@ -65,6 +74,11 @@ MemoryEstimate build_terms(const SceneSize& size, const BuildPlan& plan) {
     MemoryEstimate e;
     const uint64_t triangles = plan.two_level ? size.triangles : size.instanced_triangles;
     const auto references = uint64_t(double(triangles) * reference_cap_per_triangle(plan.builder)) + 1;
+    if (plan.builder == kKdTreeName) {  // no PrimRefs, binary BVH or wide layout
+        e.references = references * kKdBuildBytesPerReference;
+        e.layout = references * kKdTreeBytesPerReference;
+        return e;
+    }
     e.references = references * kReferenceBytes;
     e.binary = references * kBinaryBytesPerReference;
     e.layout = references * (wide_node_bytes_per_reference(plan.width) + leaf_bytes_per_reference(plan.width));

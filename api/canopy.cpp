@@ -103,7 +103,7 @@ Scene to_scene(std::span<const MeshArrays> meshes, std::span<const MeshInstance>
 }
 
 CanopyOptions engine_options(const AccelOptions& options) {
-    if (options.builder != "auto") naming("builder", [&] { find_builder(options.builder); });
+    if (options.builder != "auto") naming("builder", [&] { check_builder_name(options.builder); });
     naming("kernel", [&] { kernel_width(options.kernel); });
     if (options.toplevel != "flat" && options.toplevel != "two-level" && options.toplevel != "rebraid")
         throw std::invalid_argument("toplevel: unknown '" + options.toplevel + "' (known: flat, two-level, rebraid)");
@@ -296,7 +296,7 @@ AccelStats Accel::stats(bool with_epo) const {
 
 std::vector<BuilderDescription> registered_builders() {
     std::vector<BuilderDescription> out;
-    for (const BuilderEntry& entry : builders()) out.push_back({entry.name, entry.description});
+    for (const BuilderName& entry : all_builders()) out.push_back({entry.name, entry.description});
     return out;
 }
 

@@ -96,6 +96,9 @@ struct CanopyOptions {
 std::unique_ptr<Accelerator> make_canopy_accelerator(const FlatScene& scene, const CanopyOptions& options);
 // Any top level: `flat` must be flatten(scene).
 std::unique_ptr<Accelerator> make_canopy_accelerator(const Scene& scene, const FlatScene& flat, const CanopyOptions& options);
+// Builder "kdtree" (renderer/kd_accel.cpp), which make_canopy_accelerator routes there: kernel "kd", flat top
+// level only (std::invalid_argument otherwise).
+std::unique_ptr<Accelerator> make_kd_accelerator(const FlatScene& scene, const CanopyOptions& options);
 
 // Objects (OBJ groups) in object space, and a two-level instance per (scene instance, object), with triangle ids
 // numbered as flatten() numbers them, so hits index the flat scene's triangles.

@@ -1,4 +1,5 @@
 #include "accel/builder.h"
+#include "accel/kdtree.h"
 #include "accel/metrics.h"
 #include "kernels/dispatch.h"
 #include "kernels/traverse.h"
@@ -372,6 +373,20 @@ private:
     std::unique_ptr<CanopyAccelerator> chosen_;
 };
 
+// The accelerators of the structure families other than the BVH, by the names accel/builder.h's other_families()
+// lists.
+struct FamilyFactory {
+    const char* name;
+    std::unique_ptr<Accelerator> (*make)(const FlatScene&, const CanopyOptions&);
+};
+constexpr FamilyFactory kFamilies[] = {{kKdTreeName, &make_kd_accelerator}};
+
+std::unique_ptr<Accelerator> make_family_accelerator(const FlatScene& flat, const CanopyOptions& options) {
+    for (const FamilyFactory& family : kFamilies)
+        if (options.builder == family.name) return family.make(flat, options);
+    return nullptr;
+}
+
 }  // namespace
 
 TwoLevelInput two_level_input(const Scene& scene) {
@@ -401,6 +416,7 @@ TwoLevelInput two_level_input(const Scene& scene) {
 
 std::unique_ptr<Accelerator> make_canopy_accelerator(const FlatScene& scene, const CanopyOptions& options) {
     if (options.builder == "auto") throw std::invalid_argument("builder 'auto' needs the scene's objects and instances");
+    if (auto family = make_family_accelerator(scene, options)) return family;
     return std::make_unique<CanopyAccelerator>(nullptr, scene, options);
 }
 
@@ -411,6 +427,7 @@ std::unique_ptr<Accelerator> make_canopy_accelerator(const Scene& scene, const F
         kernel_width(options.kernel);  // an unknown kernel fails here, not at the first build
         return std::make_unique<AutoAccelerator>(scene, flat, options);
     }
+    if (auto family = make_family_accelerator(flat, options)) return family;
     return std::make_unique<CanopyAccelerator>(&scene, flat, options);
 }
 

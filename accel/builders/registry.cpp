@@ -13,7 +13,9 @@
 #include "accel/builders/streelet.h"
 #include "accel/builders/tree_rotations.h"
 #include "accel/builders/treelet_restructuring.h"
+#include "accel/kdtree.h"
 
+#include <algorithm>
 #include <stdexcept>
 
 namespace canopy {
@@ -45,13 +47,48 @@ const std::vector<BuilderEntry>& builders() {
     return registry;
 }
 
-const BuilderEntry& find_builder(const std::string& name) {
+const std::vector<FamilyEntry>& other_families() {
+    static const std::vector<FamilyEntry> registry = {
+        {kKdTreeName, "SAH kd-tree (Wald and Havran 2006): O(N log N) event sweep, perfect splits, empty-space bonus; "
+                      "flat top level only", "kd-tree"},
+    };
+    return registry;
+}
+
+std::vector<BuilderName> all_builders() {
+    std::vector<BuilderName> names;
+    for (const BuilderEntry& entry : builders()) names.push_back({entry.name, entry.description});
+    for (const FamilyEntry& entry : other_families()) names.push_back({entry.name, entry.description});
+    return names;
+}
+
+bool is_bvh_builder(const std::string& name) {
+    return std::any_of(builders().begin(), builders().end(), [&](const BuilderEntry& b) { return b.name == name; });
+}
+
+namespace {
+
+[[noreturn]] void unknown_builder(const std::string& name) {
     std::string known;
-    for (const BuilderEntry& entry : builders()) {
-        if (entry.name == name) return entry;
-        known += (known.empty() ? "" : ", ") + entry.name;
-    }
+    for (const BuilderName& entry : all_builders()) known += (known.empty() ? "" : ", ") + entry.name;
     throw std::invalid_argument("unknown builder '" + name + "' (known: " + known + ")");
+}
+
+}  // namespace
+
+const BuilderEntry& find_builder(const std::string& name) {
+    for (const BuilderEntry& entry : builders())
+        if (entry.name == name) return entry;
+    for (const FamilyEntry& family : other_families())
+        if (family.name == name)
+            throw std::invalid_argument("builder '" + name + "' builds a " + family.structure +
+                                        ", not a BVH: it has no object BVHs, start trees or BVH kernels");
+    unknown_builder(name);
+}
+
+void check_builder_name(const std::string& name) {
+    const std::vector<BuilderName> names = all_builders();
+    if (std::none_of(names.begin(), names.end(), [&](const BuilderName& b) { return b.name == name; })) unknown_builder(name);
 }
 
 Bvh build_start_tree(BuildInput&& input, const BuildSettings& settings, const char* default_start) {

@@ -118,7 +118,7 @@ bool builds_its_accelerator(const std::vector<Entry>& entries, size_t i) {
 
 // --start applies to the optimisers in a bench; plain builders in the same run ignore it.
 std::string optimiser_start(const std::string& builder, const std::string& start) {
-    return builder != "auto" && find_builder(builder).default_start ? start : "";
+    return is_bvh_builder(builder) && find_builder(builder).default_start ? start : "";
 }
 
 // Every row keeps its accelerator from its build to the report: the memory to plan for is all of them. Rows
@@ -160,6 +160,12 @@ std::vector<Entry> make_entries(const Scene& scene, const FlatScene& flat, const
                         for (const std::string& collapse : o.collapses) {
                             // A binary layout is the same with every collapse: one row, not a copy of it.
                             if (collapse != o.collapses.front() && kernel_width(kernel) == 2) continue;
+                            // Another structure family (the kd-tree) has one kernel: one row, not one per BVH kernel,
+                            // traversal mode or collapse.
+                            const bool bvh = builder == "auto" || is_bvh_builder(builder);
+                            if (!bvh && (kernel != o.kernels.front() || traversal != o.traversals.front() ||
+                                         collapse != o.collapses.front()))
+                                continue;
                             CanopyOptions options{builder, optimiser_start(builder, o.start), kernel,
                                                   traversal == "robust", intersector == "watertight", toplevel};
                             options.collapse = parse_collapse_method(collapse);

@@ -55,7 +55,7 @@ int main(int argc, char** argv) {
     render->add_option("-o,--output", r.output, "Output EXR")->capture_default_str();
     render->add_option("--spp", r.spp, "Samples (frames) per pixel")->check(CLI::Range(1, 1 << 20))->capture_default_str();
     render->add_option("--size", r.size, "Width and height")->expected(2)->check(CLI::Range(1, 16384))->capture_default_str();
-    render->add_option("--builder", r.builder, "BVH builder: " + builder_names())->capture_default_str();
+    render->add_option("--builder", r.builder, "Builder (of a BVH, or kdtree: a kd-tree): " + builder_names())->capture_default_str();
     render->add_option("--start", r.start, "Optimisers: builder of the start tree (default: the optimiser's own)");
     render->add_option("--toplevel", r.toplevel, "flat, two-level or rebraid")
         ->check(CLI::IsMember({"flat", "two-level", "rebraid"}))->capture_default_str();
@@ -147,7 +147,7 @@ int main(int argc, char** argv) {
     std::vector<int> study_size{256, 192};
     CLI::App* study = app.add_subcommand("study", "SAH, EPO and LCV against measured ns/ray for every builder (Aila et al. 2013)");
     study->add_option("scenes", st.scenes, "Scenes: scene.json, .obj, .gltf, .glb or gen:NAME?tris=N&seed=S")->required();
-    study->add_option("--builder", st.builders, "Builders (default: all): " + builder_names())->delimiter(',');
+    study->add_option("--builder", st.builders, "Builders (default: every BVH builder): " + builder_names())->delimiter(',');
     study->add_option("--size", study_size, "Width and height of the frame whose diffuse rays are timed")
         ->expected(2)->check(CLI::Range(1, 16384))->capture_default_str();
     study->add_option("--repeats", st.repeats, "Timing passes per tree (fastest kept)")->check(CLI::Range(1, 100))->capture_default_str();
@@ -179,7 +179,7 @@ int main(int argc, char** argv) {
 
     AccuracyOptions ac;
     CLI::App* accuracy = app.add_subcommand("accuracy", "Leaks and hit-distance error of every intersector and traversal mode, scaled and moved");
-    accuracy->add_option("--builder", ac.builder, "BVH builder: " + builder_names())->capture_default_str();
+    accuracy->add_option("--builder", ac.builder, "Builder (of a BVH, or kdtree: a kd-tree): " + builder_names())->capture_default_str();
     accuracy->add_option("--kernel", ac.kernel, "Kernel: auto (widest), bvh2, bvh4, bvh8")->capture_default_str();
     accuracy->add_option("--rays", ac.rays, "Rays per case and mode")->check(CLI::Range(1, 100000000))->capture_default_str();
     accuracy->add_option("--json", ac.json_path, "Write the rows as JSON");
@@ -206,7 +206,7 @@ int main(int argc, char** argv) {
             run_tradeoff(tr);
         } else if (*study) {
             distributed::checked([&] {
-                for (const std::string& b : st.builders) find_builder(b);  // unknown names fail before any work
+                for (const std::string& b : st.builders) check_builder_name(b);  // unknown names fail before any work
             });
             st.width = study_size[0], st.height = study_size[1];
             run_study(st);

@@ -19,7 +19,7 @@ namespace canopy {
 
 std::string builder_names() {
     std::string names;
-    for (const BuilderEntry& b : builders()) names += (names.empty() ? "" : ", ") + b.name;
+    for (const BuilderName& b : all_builders()) names += (names.empty() ? "" : ", ") + b.name;
     return names + ", or auto (chosen from scene statistics for --frames-planned)";
 }
 

@@ -129,6 +129,15 @@ std::vector<double> predicted(const std::vector<Row>& rows, bool scalar, double 
     return p;
 }
 
+// The rows the fits are over: the BVHs'. Another structure family's rows (the kd-tree) are measured and listed,
+// but have no EPO or wide layout, and its SAH sums voxel areas, not the triangles' bounds.
+std::vector<Row> bvh_rows(const std::vector<Row>& rows) {
+    std::vector<Row> out;
+    for (const Row& r : rows)
+        if (is_bvh_builder(r.builder)) out.push_back(r);
+    return out;
+}
+
 std::vector<double> measured(const std::vector<Row>& rows, bool scalar) {
     std::vector<double> m;
     for (const Row& r : rows) m.push_back(scalar ? r.scalar_ns : r.simd_ns);
@@ -177,8 +186,8 @@ Fit fixed_fit(const std::vector<SceneResult>& results, bool scalar, bool with_lc
             double sum = 0;
             int counted = 0;
             for (const SceneResult& s : results)
-                if (auto c = pearson(predicted(s.rows, scalar, a / double(kGridSteps), b / double(kGridSteps)),
-                                     measured(s.rows, scalar)))
+                if (auto c = pearson(predicted(bvh_rows(s.rows), scalar, a / double(kGridSteps), b / double(kGridSteps)),
+                                     measured(bvh_rows(s.rows), scalar)))
                     sum += *c, ++counted;
             if (counted && (!best.correlation || sum / counted > *best.correlation))
                 best = {a / double(kGridSteps), b / double(kGridSteps), sum / counted};
@@ -274,8 +283,9 @@ void write_plot(const std::vector<SceneResult>& results, const std::string& path
     };
     for (size_t s = 0; s < results.size(); ++s) {
         const int x0 = int(s) * kPanel;
-        const std::vector<double> p = predicted(results[s].rows, false, results[s].simd_lcv.alpha, results[s].simd_lcv.beta);
-        const std::vector<double> m = measured(results[s].rows, false);
+        const std::vector<Row> rows = bvh_rows(results[s].rows);
+        const std::vector<double> p = predicted(rows, false, results[s].simd_lcv.alpha, results[s].simd_lcv.beta);
+        const std::vector<double> m = measured(rows, false);
         const auto [pmin, pmax] = std::minmax_element(p.begin(), p.end());
         const auto [mmin, mmax] = std::minmax_element(m.begin(), m.end());
         const int span = kPanel - 2 * kMargin;
@@ -379,9 +389,10 @@ SceneResult study_scene(const std::string& scene_name, const Scene& scene, const
         auto simd = make_canopy_accelerator(flat, {name, "", "auto"});
         for (Accelerator* a : {scalar.get(), simd.get()}) a->prepare(), a->build();
         const AcceleratorReport rs = scalar->report(true), rw = simd->report(true);
-        Row row{name, distributed::host(), *rs.sah, *rs.epo, ns_per_ray(*scalar, rays, o.repeats),
-                *rw.sah, *rw.epo, leaf_count_variability(*simd, rays), ns_per_ray(*simd, rays, o.repeats),
-                *rw.layout_sah, *rw.layout_epo};
+        const double none = std::nan("");  // what another structure family does not define (EPO, wide layouts)
+        Row row{name, distributed::host(), rs.sah.value_or(none), rs.epo.value_or(none), ns_per_ray(*scalar, rays, o.repeats),
+                rw.sah.value_or(none), rw.epo.value_or(none), leaf_count_variability(*simd, rays), ns_per_ray(*simd, rays, o.repeats),
+                rw.layout_sah.value_or(none), rw.layout_epo.value_or(none)};
         report.printf("  %-8s scalar: SAH %7.2f EPO %7.2f %7.1f ns/ray | %s: SAH %7.2f EPO %7.2f LCV %6.2f %7.1f ns/ray\n",
                       name.c_str(), row.scalar_sah, row.scalar_epo, row.scalar_ns, simd->kernel().c_str(), row.sah,
                       row.epo, row.lcv, row.simd_ns);
@@ -394,11 +405,12 @@ SceneResult study_scene(const std::string& scene_name, const Scene& scene, const
 }
 
 void fit(SceneResult& result) {
-    result.scalar_sah = pearson(predicted(result.rows, true, 0, 0), measured(result.rows, true));
-    result.simd_sah = pearson(predicted(result.rows, false, 0, 0), measured(result.rows, false));
-    result.scalar_epo = best_fit(result.rows, true, false);
-    result.simd_epo = best_fit(result.rows, false, false);
-    result.simd_lcv = best_fit(result.rows, false, true);
+    const std::vector<Row> rows = bvh_rows(result.rows);
+    result.scalar_sah = pearson(predicted(rows, true, 0, 0), measured(rows, true));
+    result.simd_sah = pearson(predicted(rows, false, 0, 0), measured(rows, false));
+    result.scalar_epo = best_fit(rows, true, false);
+    result.simd_epo = best_fit(rows, false, false);
+    result.simd_lcv = best_fit(rows, false, true);
 }
 
 // Every scene's rows, on rank 0 (under a job, each scene measured by one rank: per_scene.h), and their fits.
