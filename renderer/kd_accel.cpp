@@ -62,6 +62,8 @@ public:
         if (!options.start.empty())
             throw std::invalid_argument("--start " + options.start + ": builder '" + options.builder +
                                         "' is not an optimiser and takes no start tree");
+        if (options.permute_nodes)
+            throw std::invalid_argument("builder '" + options.builder + "': permuted nodes are an experiment on wide BVH layouts");
         kernel_width(options.kernel);  // an unknown kernel name fails here as for the BVHs; the kd kernel has no width
     }
 
