@@ -12,7 +12,6 @@
 #include <tbb/enumerable_thread_specific.h>
 
 #include <cstdio>
-
 #include <variant>
 
 namespace canopy {

@@ -9,6 +9,7 @@
 #include <catch2/catch.hpp>
 #include <tbb/parallel_for.h>
 
+#include <filesystem>
 #include <random>
 #include <span>
 #include <string>
@@ -68,6 +69,31 @@ inline std::vector<Ray> random_rays(std::span<const Triangle> tris, size_t count
         rays.push_back(ray);
     }
     return rays;
+}
+
+// random_rays with bounded intervals: every third starts 5% of the scene's diagonal along, every other one ends at
+// 30% of it.
+inline std::vector<Ray> bounded_interval_rays(const FlatScene& flat, size_t count, uint64_t seed) {
+    std::vector<Ray> rays = random_rays(flat.triangles, count, seed);
+    const float diagonal = glm::length(flat.bounds.extent());
+    for (size_t i = 0; i < rays.size(); ++i) {
+        rays[i].tmin = (i % 3 == 0) ? 0.05f * diagonal : 0.0f;
+        rays[i].tmax = (i % 2 == 0) ? 0.3f * diagonal : rays[i].tmax;
+    }
+    return rays;
+}
+
+// The oracle tests' shared scenes, each flattened and passed to check(flat, name); an absent one is a warning.
+template <class Check>
+void for_each_shared_scene(Check&& check) {
+    for (const char* name : {"stanford-bunny", "sibenik", "crytek-sponza"}) {
+        const std::filesystem::path path = std::filesystem::path(CANOPY_SHARED_SCENES) / name / "scene.json";
+        if (!std::filesystem::exists(path)) {
+            WARN("skipped: " << path << " is absent");
+            continue;
+        }
+        check(flatten(load_scene(path.string())), name);
+    }
 }
 
 // The rays of random_rays whose origin is not on a surface (kinds 0 to 2). A ray from one point of a flat

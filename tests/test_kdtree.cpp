@@ -10,7 +10,6 @@
 #include <tbb/global_control.h>
 
 #include <cstring>
-#include <filesystem>
 
 using namespace canopy;
 using namespace canopy::test;
@@ -124,26 +123,14 @@ TEST_CASE("the kd-tree agrees with brute force at extreme scales and offsets", "
 }
 
 TEST_CASE("the kd-tree agrees with brute force on shared scenes", "[kdtree][oracle][shared]") {
-    for (const char* name : {"stanford-bunny", "sibenik", "crytek-sponza"}) {
-        const std::filesystem::path path = std::filesystem::path(CANOPY_SHARED_SCENES) / name / "scene.json";
-        if (!std::filesystem::exists(path)) {
-            WARN("skipped: " << path << " is absent");
-            continue;
-        }
-        const FlatScene flat = flatten(load_scene(path.string()));
+    for_each_shared_scene([](const FlatScene& flat, const char* name) {
         check_kd_against_oracle(flat.triangles, random_rays(flat.triangles, scaled(10000, 1000), 23), name);
-    }
+    });
 }
 
 TEST_CASE("kd-tree rays with bounded intervals agree with brute force", "[kdtree][oracle]") {
     const FlatScene flat = flatten(load_scene(scaled_spec("box", 4000, 8)));
-    std::vector<Ray> rays = random_rays(flat.triangles, scaled(20000), 29);
-    const float diagonal = glm::length(flat.bounds.extent());
-    for (size_t i = 0; i < rays.size(); ++i) {
-        rays[i].tmin = (i % 3 == 0) ? 0.05f * diagonal : 0.0f;
-        rays[i].tmax = (i % 2 == 0) ? 0.3f * diagonal : rays[i].tmax;
-    }
-    check_kd_against_oracle(flat.triangles, rays, "box with tmin/tmax");
+    check_kd_against_oracle(flat.triangles, bounded_interval_rays(flat, scaled(20000), 29), "box with tmin/tmax");
 }
 
 TEST_CASE("the kd-tree's Möller–Trumbore kernel agrees with brute-force Möller–Trumbore", "[kdtree][oracle][fast]") {

@@ -2,8 +2,6 @@
 #include "oracle.h"
 #include "test_scale.h"
 
-#include <filesystem>
-
 using namespace canopy;
 using namespace canopy::test;
 
@@ -17,27 +15,14 @@ TEST_CASE("builders and kernels agree with brute force on procedural scenes", "[
 }
 
 TEST_CASE("builders and kernels agree with brute force on shared scenes", "[oracle][shared]") {
-    const char* scenes[] = {"stanford-bunny", "sibenik", "crytek-sponza"};
-    for (const char* name : scenes) {
-        const std::filesystem::path path = std::filesystem::path(CANOPY_SHARED_SCENES) / name / "scene.json";
-        if (!std::filesystem::exists(path)) {
-            WARN("skipped: " << path << " is absent");
-            continue;
-        }
-        const FlatScene flat = flatten(load_scene(path.string()));
+    for_each_shared_scene([](const FlatScene& flat, const char* name) {
         check_against_oracle(flat.triangles, random_rays(flat.triangles, scaled(10000, 1000), 23), name);
-    }
+    });
 }
 
 TEST_CASE("rays with bounded intervals agree with brute force", "[oracle]") {
     const FlatScene flat = flatten(load_scene(scaled_spec("box", 4000, 8)));
-    std::vector<Ray> rays = random_rays(flat.triangles, scaled(20000), 29);
-    const float diagonal = glm::length(flat.bounds.extent());
-    for (size_t i = 0; i < rays.size(); ++i) {
-        rays[i].tmin = (i % 3 == 0) ? 0.05f * diagonal : 0.0f;
-        rays[i].tmax = (i % 2 == 0) ? 0.3f * diagonal : rays[i].tmax;
-    }
-    check_against_oracle(flat.triangles, rays, "box with tmin/tmax");
+    check_against_oracle(flat.triangles, bounded_interval_rays(flat, scaled(20000), 29), "box with tmin/tmax");
 }
 
 TEST_CASE("Möller–Trumbore kernels agree with brute-force Möller–Trumbore", "[oracle][fast]") {
