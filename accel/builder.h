@@ -14,6 +14,20 @@ struct BuildInput {
     std::vector<PrimRef> refs;            // one per triangle on entry; the builder may reorder or grow it
 };
 
+// Early split clipping's surface-area limit, SA_max of Ernst and Greiner 2007 (Algorithm 4), for builder "esc":
+// automatic (early_split_clipping.h), an absolute box area in scene units (the paper's), or a multiple of the
+// scene's median ideal triangle area (Karras and Aila 2013, sec. 5), which means the same on scenes of any scale.
+struct SaMax {
+    enum class Unit { Automatic, Absolute, MedianIdealArea };
+    Unit unit = Unit::Automatic;
+    float value = 0.0f;  // > 0 and finite unless automatic
+
+    bool operator==(const SaMax&) const = default;
+};
+// "auto", "12.5" (absolute) or "8x" (median ideal areas); throws std::invalid_argument naming `text` otherwise.
+SaMax parse_sa_max(const std::string& text);
+std::string sa_max_name(const SaMax& sa_max);  // parse_sa_max's inverse
+
 struct BuildSettings {
     SahCosts costs;
     uint32_t max_leaf_size = 8;  // a leaf is split above this even when SAH prefers a leaf
@@ -23,6 +37,7 @@ struct BuildSettings {
     uint32_t leaf_block = 1;
     // Optimisers restructure a tree built by another builder: this one, or the optimiser's default if empty.
     std::string start;
+    SaMax esc_sa_max;  // builder "esc" only
 
     float leaf_tests(uint32_t n) const { return float((n + leaf_block - 1) / leaf_block); }
 };

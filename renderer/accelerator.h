@@ -90,6 +90,7 @@ struct CanopyOptions {
     std::optional<uint64_t> permute_nodes;
     // rebraid: open BRefs wider than this share of their segment's largest extent (Benthin et al. 2017, sec. 4.2).
     float rebraid_threshold = TwoLevelSettings{}.open_extent;
+    SaMax esc_sa_max;  // builder "esc": SA_max of early split clipping (accel/builder.h)
 };
 
 // Throws std::invalid_argument for an unknown builder or kernel, or a two-level top level (it needs the scene).

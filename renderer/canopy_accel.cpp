@@ -106,6 +106,7 @@ public:
         // SAH charges a leaf one test per 4 triangles for the SIMD kernels although they test 8 at once: on
         // crytek-sponza that tree traced faster than one charged per 8 (bvh8 / Embree 1.29 against 1.36, two runs each).
         if (width_ > 2) settings_.leaf_block = 4;
+        settings_.esc_sa_max = options.esc_sa_max;
         if (!options.start.empty()) {
             if (!builder_.default_start)
                 throw std::invalid_argument("--start " + options.start + ": builder '" + builder_.name +
@@ -132,7 +133,7 @@ public:
     std::string builder() const override {
         const std::string name = builder_.default_start
                                      ? builder_.name + "<" + (settings_.start.empty() ? builder_.default_start : settings_.start)
-                                     : builder_.name;
+                                     : builder_.name + esc_suffix();
         if (!two_level_input_) return name;
         return top_level_name() + "/" + name;
     }
@@ -142,6 +143,10 @@ public:
                (options_.permute_nodes ? " permuted" : "");
     }
     std::string quality() const override { return ""; }
+    // "@8x" for early split clipping at another SA_max than the automatic one.
+    std::string esc_suffix() const {
+        return settings_.esc_sa_max == SaMax{} ? "" : "@" + sa_max_name(settings_.esc_sa_max);
+    }
     // "rebraid@5%" for a re-braided top level with another than the paper's opening threshold.
     std::string top_level_name() const {
         if (options_.toplevel != "rebraid" || options_.rebraid_threshold == TwoLevelSettings{}.open_extent) return options_.toplevel;
@@ -380,6 +385,12 @@ struct FamilyFactory {
 };
 constexpr FamilyFactory kFamilies[] = {{kKdTreeName, &make_kd_accelerator}};
 
+// Options of one builder given to another are refused, not ignored.
+void check_builder_options(const CanopyOptions& options) {
+    if (options.esc_sa_max != SaMax{} && options.builder != "esc")
+        throw std::invalid_argument("SA_max " + sa_max_name(options.esc_sa_max) + ": builder 'esc' only, not '" + options.builder + "'");
+}
+
 std::unique_ptr<Accelerator> make_family_accelerator(const FlatScene& flat, const CanopyOptions& options) {
     for (const FamilyFactory& family : kFamilies)
         if (options.builder == family.name) return family.make(flat, options);
@@ -414,12 +425,14 @@ TwoLevelInput two_level_input(const Scene& scene) {
 }
 
 std::unique_ptr<Accelerator> make_canopy_accelerator(const FlatScene& scene, const CanopyOptions& options) {
+    check_builder_options(options);
     if (options.builder == "auto") throw std::invalid_argument("builder 'auto' needs the scene's objects and instances");
     if (auto family = make_family_accelerator(scene, options)) return family;
     return std::make_unique<CanopyAccelerator>(nullptr, scene, options);
 }
 
 std::unique_ptr<Accelerator> make_canopy_accelerator(const Scene& scene, const FlatScene& flat, const CanopyOptions& options) {
+    check_builder_options(options);
     if (options.builder == "auto") {
         if (options.toplevel != "flat") throw std::invalid_argument("builder 'auto' chooses the top level itself: drop --toplevel");
         if (options.frames_planned < 1) throw std::invalid_argument("--frames-planned must be at least 1");

@@ -143,7 +143,35 @@ TEST_CASE("early split clipping pieces lie in their triangle, cover it and respe
         CHECK(too_big == 0);
     }
     CHECK_THROWS_AS(early_split_clip_refs(tris, make_prim_refs(tris), 0.0f), std::invalid_argument);
-    CHECK_THROWS_AS(build_esc_with(BuildInput{tris, make_prim_refs(tris)}, {}, EscSettings{-1.0f}), std::invalid_argument);
+    BuildSettings negative;
+    negative.esc_sa_max = {SaMax::Unit::Absolute, -1.0f};
+    CHECK_THROWS_AS(build_esc(BuildInput{tris, make_prim_refs(tris)}, negative), std::invalid_argument);
+}
+
+TEST_CASE("SA_max parses as auto, a box area or median ideal areas, and means the same at any scale", "[builders][split]") {
+    CHECK(parse_sa_max("auto") == SaMax{});
+    CHECK(parse_sa_max("12.5") == SaMax{SaMax::Unit::Absolute, 12.5f});
+    CHECK(parse_sa_max("8x") == SaMax{SaMax::Unit::MedianIdealArea, 8.0f});
+    for (const char* text : {"auto", "12.5", "8x", "0.25x"}) CHECK(sa_max_name(parse_sa_max(text)) == text);
+    for (const char* bad : {"", "x", "0", "-1", "0x", "nan", "inf", "8y", "8xx", "1e40", "auto8"}) {
+        INFO(bad);
+        CHECK_THROWS_AS(parse_sa_max(bad), std::invalid_argument);
+    }
+    // A multiple of the median ideal area splits a scene and the same scene scaled by 2^20 into the same pieces.
+    const FlatScene slivers = flatten(load_scene("gen:cylinders?tris=4000&seed=5"));
+    std::vector<Triangle> scaled = slivers.triangles;
+    for (Triangle& t : scaled) t = {t.v0 * 1048576.0f, t.v1 * 1048576.0f, t.v2 * 1048576.0f};
+    const SaMax four{SaMax::Unit::MedianIdealArea, 4.0f};
+    const float at_one = resolve_sa_max(slivers.triangles, make_prim_refs(slivers.triangles), four);
+    const float at_scale = resolve_sa_max(scaled, make_prim_refs(scaled), four);
+    CHECK(at_scale == Approx(at_one * 1048576.0f * 1048576.0f).epsilon(1e-5));
+    const size_t pieces = early_split_clip_refs(slivers.triangles, make_prim_refs(slivers.triangles), at_one).size();
+    CHECK(pieces > slivers.triangles.size());
+    CHECK(early_split_clip_refs(scaled, make_prim_refs(scaled), at_scale).size() == pieces);
+    // Halving SA_max never cuts fewer pieces.
+    const SaMax two{SaMax::Unit::MedianIdealArea, 2.0f};
+    CHECK(early_split_clip_refs(slivers.triangles, make_prim_refs(slivers.triangles),
+                                resolve_sa_max(slivers.triangles, make_prim_refs(slivers.triangles), two)).size() >= pieces);
 }
 
 TEST_CASE("automatic SA_max splits scenes of slivers and leaves well-filled boxes alone", "[builders][split]") {

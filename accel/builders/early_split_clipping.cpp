@@ -7,7 +7,9 @@
 
 #include <algorithm>
 #include <limits>
+#include <numeric>
 #include <cmath>
+#include <cstdio>
 #include <stdexcept>
 #include <string>
 
@@ -52,36 +54,62 @@ float ideal_area(const Triangle& t) {
     return std::abs(n.x) + std::abs(n.y) + std::abs(n.z);
 }
 
+// The median of A_ideal over the references' triangles (0 when there are none).
+double median_ideal_area(std::span<const Triangle> triangles, const std::vector<PrimRef>& refs) {
+    std::vector<float> ideal(refs.size());
+    parallel::for_each(refs.size(), 16 * 1024, [&](size_t i) { ideal[i] = ideal_area(triangles[refs[i].prim]); });
+    if (ideal.empty()) return 0.0;
+    const auto median = ideal.begin() + std::ptrdiff_t(ideal.size() / 2);
+    std::nth_element(ideal.begin(), median, ideal.end());
+    return *median;
+}
+
 }  // namespace
 
 float automatic_sa_max(std::span<const Triangle> triangles, const std::vector<PrimRef>& refs) {
     const size_t n = refs.size();
     if (n == 0) return std::numeric_limits<float>::infinity();
-    std::vector<float> ideal(n);
-    parallel::for_each(n, 16 * 1024, [&](size_t i) { ideal[i] = ideal_area(triangles[refs[i].prim]); });
-    const double ideal_sum = parallel::sum_in_order(n, 16 * 1024, [&](size_t i) { return double(ideal[i]); });
+    const double ideal_sum = parallel::sum_in_order(n, 16 * 1024, [&](size_t i) { return double(ideal_area(triangles[refs[i].prim])); });
     const double box_sum = parallel::sum_in_order(n, 16 * 1024, [&](size_t i) { return double(refs[i].bounds().area()); });
     const double fill = box_sum > 0.0 ? ideal_sum / box_sum : 1.0;
     if (fill >= kMaxFillToSplit) return std::numeric_limits<float>::infinity();
-    const auto median = ideal.begin() + std::ptrdiff_t(n / 2);
-    std::nth_element(ideal.begin(), median, ideal.end());
-    const auto sa_max = float(kIdealAreasPerPiece * double(*median));
+    const auto sa_max = float(kIdealAreasPerPiece * median_ideal_area(triangles, refs));
     return sa_max > 0.0f ? sa_max : std::numeric_limits<float>::infinity();  // most triangles degenerate
+}
+
+namespace {
+
+// Each reference's pieces at `sa_max`.
+void count_pieces(std::span<const Triangle> triangles, const std::vector<PrimRef>& refs, float sa_max, std::vector<uint32_t>& pieces) {
+    pieces.resize(refs.size());
+    parallel::for_each(refs.size(), kGrain, [&](size_t i) {
+        pieces[i] = refs[i].bounds().area() <= sa_max ? 1 : clip_until_small(triangles[refs[i].prim], refs[i].bounds(), sa_max, [](const BBox&) {});
+    });
+}
+
+void check_sa_max(float sa_max) {
+    if (!(sa_max > 0.0f)) throw std::invalid_argument("esc: SA_max must be > 0, got " + std::to_string(sa_max));
+}
+
+}  // namespace
+
+uint64_t early_split_clip_count(std::span<const Triangle> triangles, const std::vector<PrimRef>& refs, float sa_max) {
+    check_sa_max(sa_max);
+    std::vector<uint32_t> pieces;
+    count_pieces(triangles, refs, sa_max, pieces);
+    return std::accumulate(pieces.begin(), pieces.end(), uint64_t{0});
 }
 
 std::vector<PrimRef> early_split_clip_refs(std::span<const Triangle> triangles, std::vector<PrimRef>&& refs, float sa_max,
                                            uint64_t max_references) {
-    if (!(sa_max > 0.0f))
-        throw std::invalid_argument("esc: SA_max must be > 0 (or 0 in EscSettings for automatic), got " + std::to_string(sa_max));
+    check_sa_max(sa_max);
     const size_t n = refs.size();
-    std::vector<uint32_t> pieces(n);
+    std::vector<uint32_t> pieces;
     std::vector<uint64_t> offset(n + 1, 0);
     // Terminates: once SA_max exceeds every box's area (at the latest when it overflows to infinity), each
     // triangle is one piece, and n references always fit.
     for (;; sa_max *= 2.0f) {
-        parallel::for_each(n, kGrain, [&](size_t i) {
-            pieces[i] = refs[i].bounds().area() <= sa_max ? 1 : clip_until_small(triangles[refs[i].prim], refs[i].bounds(), sa_max, [](const BBox&) {});
-        });
+        count_pieces(triangles, refs, sa_max, pieces);
         for (size_t i = 0; i < n; ++i) offset[i + 1] = offset[i] + pieces[i];
         if (offset[n] <= std::max<uint64_t>(max_references, n)) break;
     }
@@ -99,20 +127,46 @@ std::vector<PrimRef> early_split_clip_refs(std::span<const Triangle> triangles, 
     return out;
 }
 
-Bvh build_esc_with(BuildInput&& input, const BuildSettings& settings, const EscSettings& esc) {
-    if (!(esc.sa_max >= 0.0f) || !std::isfinite(esc.sa_max))
-        throw std::invalid_argument("esc: SA_max must be finite and >= 0 (0: automatic), got " + std::to_string(esc.sa_max));
-    auto clip = [&](std::span<const Triangle> triangles, std::vector<PrimRef>&& refs) {
-        const float sa_max = esc.sa_max > 0.0f ? esc.sa_max : automatic_sa_max(triangles, refs);
-        const auto cap = uint64_t(kMaxEscReferencesPerTriangle * double(refs.size()));
-        return std::isfinite(sa_max) && sa_max > 0.0f ? early_split_clip_refs(triangles, std::move(refs), sa_max, cap)
-                                                       : std::move(refs);
-    };
-    return build_after_split_pass(std::move(input), settings, clip, &build_binned_sah);
+SaMax parse_sa_max(const std::string& text) {
+    if (text == "auto") return {};
+    const bool relative = text.ends_with("x");
+    const std::string number = relative ? text.substr(0, text.size() - 1) : text;
+    size_t used = 0;
+    float value = 0.0f;
+    try {
+        value = std::stof(number, &used);
+    } catch (const std::exception&) {
+        used = 0;
+    }
+    if (number.empty() || used != number.size() || !(value > 0.0f) || !std::isfinite(value))
+        throw std::invalid_argument("SA_max '" + text + "': auto, a positive box area (12.5) or a positive multiple of "
+                                    "the median ideal triangle area (8x)");
+    return {relative ? SaMax::Unit::MedianIdealArea : SaMax::Unit::Absolute, value};
+}
+
+std::string sa_max_name(const SaMax& sa_max) {
+    if (sa_max.unit == SaMax::Unit::Automatic) return "auto";
+    char text[32];
+    std::snprintf(text, sizeof text, "%g%s", double(sa_max.value), sa_max.unit == SaMax::Unit::MedianIdealArea ? "x" : "");
+    return text;
+}
+
+float resolve_sa_max(std::span<const Triangle> triangles, const std::vector<PrimRef>& refs, const SaMax& sa_max) {
+    if (sa_max.unit == SaMax::Unit::Automatic) return automatic_sa_max(triangles, refs);
+    if (!(sa_max.value > 0.0f) || !std::isfinite(sa_max.value))
+        throw std::invalid_argument("esc: SA_max must be finite and > 0, got " + std::to_string(sa_max.value));
+    if (sa_max.unit == SaMax::Unit::Absolute) return sa_max.value;
+    const double area = median_ideal_area(triangles, refs);
+    return area > 0.0 ? float(sa_max.value * area) : std::numeric_limits<float>::infinity();
 }
 
 Bvh build_esc(BuildInput&& input, const BuildSettings& settings) {
-    return build_esc_with(std::move(input), settings, EscSettings{});
+    auto clip = [&](std::span<const Triangle> triangles, std::vector<PrimRef>&& refs) {
+        const float sa_max = resolve_sa_max(triangles, refs, settings.esc_sa_max);
+        const auto cap = uint64_t(kMaxEscReferencesPerTriangle * double(refs.size()));
+        return std::isfinite(sa_max) ? early_split_clip_refs(triangles, std::move(refs), sa_max, cap) : std::move(refs);
+    };
+    return build_after_split_pass(std::move(input), settings, clip, &build_binned_sah);
 }
 
 }  // namespace canopy

@@ -6,10 +6,6 @@
 
 namespace canopy {
 
-struct EscSettings {
-    float sa_max = 0.0f;  // surface-area limit of a reference's box (full area, BBox::area); 0: automatic_sa_max
-};
-
 // Algorithm 4 of Ernst and Greiner 2007: a triangle's box is halved at the centre of its largest axis, each half
 // clipped to the triangle, until every piece's box has a surface area of at most `sa_max`. A triangle is cut
 // into at most 2^kMaxEscDepth pieces (boxes too small for float halving stop early). Deterministic.
@@ -20,6 +16,8 @@ constexpr int kMaxEscDepth = 10;
 std::vector<PrimRef> early_split_clip_refs(std::span<const Triangle> triangles, std::vector<PrimRef>&& refs, float sa_max,
                                            uint64_t max_references = UINT64_MAX);
 constexpr double kMaxEscReferencesPerTriangle = 4.0;
+// The references early_split_clip_refs would make at this SA_max, with no cap: without making them.
+uint64_t early_split_clip_count(std::span<const Triangle> triangles, const std::vector<PrimRef>& refs, float sa_max);
 
 // The automatic SA_max; Ernst and Greiner leave its choice open. Splitting pays where triangles' boxes are
 // mostly empty (slivers across the axes), and hurts where large boxes hold large, well-filled triangles (walls,
@@ -33,9 +31,12 @@ constexpr double kMaxEscReferencesPerTriangle = 4.0;
 // Returns infinity for no splitting.
 float automatic_sa_max(std::span<const Triangle> triangles, const std::vector<PrimRef>& refs);
 
-// early_split_clip_refs within kMaxEscReferencesPerTriangle, then binned SAH (accel/binned_sah.h) on the grown
-// references.
-Bvh build_esc_with(BuildInput&& input, const BuildSettings& settings, const EscSettings& esc);
+// `sa_max` in box area units for this scene: infinity for no splitting. Throws std::invalid_argument for a value
+// that is not finite and positive.
+float resolve_sa_max(std::span<const Triangle> triangles, const std::vector<PrimRef>& refs, const SaMax& sa_max);
+
+// early_split_clip_refs at settings.esc_sa_max within kMaxEscReferencesPerTriangle, then binned SAH
+// (accel/binned_sah.h) on the grown references.
 Bvh build_esc(BuildInput&& input, const BuildSettings& settings);
 
 }  // namespace canopy

@@ -56,6 +56,7 @@ struct Entry {
     std::optional<TraversalCounts> visits;  // canopy: the first timed frame's rays through the counting kernel
     uint64_t counted_rays = 0;
     std::optional<float> rebraid_threshold;  // canopy's rebraid rows
+    std::optional<std::string> esc_sa_max;   // canopy's esc rows
 
     double build_min() const { return *std::min_element(build_ms.begin(), build_ms.end()); }
     double frame_mean() const { return mean(frame_ms); }
@@ -101,6 +102,7 @@ std::vector<Entry> rows_per_tracer(std::vector<Entry> accelerators, const BenchO
             for (const std::string& batch : tracer == TracerKind::Stream ? ways : std::vector<std::string>{""}) {
                 Entry row;
                 row.accel = a.accel;
+                row.rebraid_threshold = a.rebraid_threshold, row.esc_sa_max = a.esc_sa_max;
                 row.tracer = tracer;
                 row.batch = ways.size() > 1 ? batch : "";
                 if (canopy && !batch.empty()) row.settings.batch_traversal = parse_batch_traversal(batch);
@@ -129,7 +131,8 @@ std::vector<BuildPlan> build_plans(const BenchOptions& o) {
     for (const std::string& toplevel : o.toplevels)
         for (const std::string& builder : toplevel == "flat" || o.blas_builders.empty() ? o.builders : o.blas_builders)
             for (const std::string& kernel : o.kernels)
-                plans.insert(plans.end(), copies * o.frames_planned.size(), {builder, kernel_width(kernel), toplevel != "flat"});
+                plans.insert(plans.end(), copies * o.frames_planned.size() * (builder == "esc" ? o.esc_sa_max.size() : 1),
+                             {builder, kernel_width(kernel), toplevel != "flat"});
     const bool two_level = std::any_of(o.toplevels.begin(), o.toplevels.end(), [](const std::string& t) { return t != "flat"; });
     for (size_t q = 0; q < o.embree_qualities.size(); ++q) {
         plans.push_back({"embree", 8, false});
@@ -147,6 +150,14 @@ std::string threads_text(int threads) {
 // The opening thresholds of a top level's rows: rebraid's list, one row for the others.
 std::vector<float> rebraid_thresholds_of(const std::string& toplevel, const BenchOptions& o) {
     return toplevel == "rebraid" ? o.rebraid_thresholds : std::vector<float>{TwoLevelSettings{}.open_extent};
+}
+
+// The SA_max values of a builder's rows: esc's list, one (automatic) row for the others.
+std::vector<SaMax> sa_max_values_of(const std::string& builder, const BenchOptions& o) {
+    if (builder != "esc") return {SaMax{}};
+    std::vector<SaMax> values;
+    for (const std::string& text : o.esc_sa_max) values.push_back(parse_sa_max(text));
+    return values;
 }
 
 std::vector<Entry> make_entries(const Scene& scene, const FlatScene& flat, const BenchOptions& o, int threads) {
@@ -170,11 +181,13 @@ std::vector<Entry> make_entries(const Scene& scene, const FlatScene& flat, const
                                                   traversal == "robust", intersector == "watertight", toplevel};
                             options.collapse = parse_collapse_method(collapse);
                             if (builder != "auto") {
-                                for (const float threshold : rebraid_thresholds_of(toplevel, o)) {
-                                    options.rebraid_threshold = threshold;
-                                    entries.push_back({make_canopy_accelerator(scene, flat, options)});
-                                    if (toplevel == "rebraid") entries.back().rebraid_threshold = threshold;
-                                }
+                                for (const float threshold : rebraid_thresholds_of(toplevel, o))
+                                    for (const SaMax sa_max : sa_max_values_of(builder, o)) {
+                                        options.rebraid_threshold = threshold, options.esc_sa_max = sa_max;
+                                        entries.push_back({make_canopy_accelerator(scene, flat, options)});
+                                        if (toplevel == "rebraid") entries.back().rebraid_threshold = threshold;
+                                        if (builder == "esc") entries.back().esc_sa_max = sa_max_name(sa_max);
+                                    }
                                 continue;
                             }
                             if (toplevel != o.toplevels.front()) continue;  // auto chooses the top level itself
@@ -305,6 +318,7 @@ nlohmann::json results_json(const std::vector<Entry>& entries, uint64_t tris) {
                            {"tracer", tracer_name(e.tracer)},
                            {"threads", e.threads},
                            {"rebraid_threshold", or_null(e.rebraid_threshold)},
+                           {"esc_sa_max", or_null(e.esc_sa_max)},
                            {"batch_traversal", e.tracer != TracerKind::Stream ? nlohmann::json(nullptr)
                                                : canopy ? nlohmann::json(batch_traversal_name(e.settings.batch_traversal))
                                                : nlohmann::json(e.settings.embree_packets ? "rtcIntersect16" : "rtcIntersect1M")},
@@ -330,6 +344,7 @@ nlohmann::json results_json(const std::vector<Entry>& entries, uint64_t tris) {
                            {"bytes", or_null(r.bytes)},
                            {"inner_per_ray", or_null(e.per_ray(&TraversalCounts::inner_nodes))},
                            {"leaves_per_ray", or_null(e.per_ray(&TraversalCounts::leaf_nodes))},
+                           {"triangles_per_ray", or_null(e.per_ray(&TraversalCounts::triangle_tests))},
                            {"lines_per_ray", or_null(e.per_ray(&TraversalCounts::cache_lines))},
                            {"lines_per_ray_estimate", canopy ? nlohmann::json(nullptr) : or_null(embree_lines)},
                            {"image_mean", e.image_mean},
@@ -578,14 +593,18 @@ nlohmann::json bench_scene(const BenchOptions& o, LoadedScene& loaded, SceneRepo
 
 }  // namespace
 
-void run_bench(const std::vector<std::string>& scenes, const BenchOptions& o) {
+std::vector<nlohmann::json> measure_bench(const std::vector<std::string>& scenes, const BenchOptions& o) {
     const auto load = [&](const std::string& scene) -> SceneWork {
         BenchOptions one = o;
         one.scene = scene;
         const std::shared_ptr<LoadedScene> loaded = load_bench_scene(one);
         return [one, loaded](SceneReport& out) { return bench_scene(one, *loaded, out); };
     };
-    const std::vector<nlohmann::json> results = run_per_scene(scenes, load);
+    return run_per_scene(scenes, load);
+}
+
+void run_bench(const std::vector<std::string>& scenes, const BenchOptions& o) {
+    const std::vector<nlohmann::json> results = measure_bench(scenes, o);
     distributed::checked([&] {
         if (distributed::is_root()) write_json(results.size() == 1 ? results[0] : nlohmann::json{{"scenes", results}}, o.json_path);
     });

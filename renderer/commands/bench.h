@@ -1,6 +1,8 @@
 #pragma once
 #include "accel/two_level.h"
 
+#include <nlohmann/json.hpp>
+
 #include <cstdint>
 #include <optional>
 #include <string>
@@ -15,6 +17,7 @@ struct BenchOptions {
     std::vector<std::string> kernels{"auto"};
     std::vector<std::string> toplevels{"flat"};  // flat, two-level, rebraid
     std::vector<float> rebraid_thresholds{TwoLevelSettings().open_extent};  // a rebraid row each (sec. 4.2, Fig. 4)
+    std::vector<std::string> esc_sa_max{"auto"};  // builder esc: a row each (parse_sa_max: auto, 12.5, 8x)
     std::vector<std::string> blas_builders;  // object BVH builders of the two-level rows; empty: `builders`
     std::vector<std::string> traversals{"robust"};      // robust, fast
     std::vector<std::string> intersectors{"watertight"};  // watertight, moller
@@ -45,5 +48,8 @@ void run_bench(const BenchOptions& options);
 // The same for each scene in turn; under a job of several ranks, each scene on one rank (per_scene.h). The JSON
 // is the one scene's, or {"scenes": [each scene's]}; every row names the host that measured it.
 void run_bench(const std::vector<std::string>& scenes, const BenchOptions& options);
+// run_bench's measurement and printed tables without the JSON file: on rank 0, each scene's JSON in the scenes'
+// order (other ranks: none). Collective.
+std::vector<nlohmann::json> measure_bench(const std::vector<std::string>& scenes, const BenchOptions& options);
 
 }  // namespace canopy

@@ -4,6 +4,7 @@
 #include "renderer/commands/accuracy.h"
 #include "renderer/commands/tradeoff.h"
 #include "renderer/commands/render.h"
+#include "renderer/commands/reproduce.h"
 #include "renderer/commands/study.h"
 #include "renderer/distributed.h"
 
@@ -14,7 +15,9 @@
 
 #include <chrono>
 #include <algorithm>
+#include <cctype>
 #include <cstdio>
+#include <cstring>
 #include <memory>
 #include <optional>
 
@@ -38,6 +41,17 @@ void keep_freed_memory() {
     constexpr int kLargest = 1 << 30;  // allocations up to 1 GiB come from the heap, which is never trimmed below it
     mallopt(M_MMAP_THRESHOLD, kLargest);
     mallopt(M_TRIM_THRESHOLD, kLargest);
+}
+
+// `text` as a POSIX shell reads it back: single-quoted when it holds anything but plain characters.
+std::string shell_quoted(const std::string& text) {
+    const bool plain = !text.empty() && std::all_of(text.begin(), text.end(), [](char c) {
+        return std::isalnum(static_cast<unsigned char>(c)) || std::strchr("_./,=:@%+-", c);
+    });
+    if (plain) return text;
+    std::string quoted = "'";
+    for (char c : text) quoted += c == '\'' ? std::string("'\\''") : std::string(1, c);
+    return quoted + "'";
 }
 
 }  // namespace
@@ -99,6 +113,10 @@ int main(int argc, char** argv) {
     CLI::Option* rebraid_option = bench->add_option("--rebraid-threshold", b.rebraid_thresholds,
                       "Rebraid rows: open BRefs wider than this share of their segment's extent, 0 to 1 (sec. 4.2); a row each")
         ->delimiter(',')->check(CLI::Range(0.0, 1.0))->capture_default_str();
+    CLI::Option* sa_max_option = bench->add_option("--esc-sa-max", b.esc_sa_max,
+                      "esc rows: SA_max of early split clipping, a row each: auto, a box area (12.5) or a multiple of the "
+                      "median ideal triangle area (8x)")
+        ->delimiter(',')->capture_default_str();
     bench->add_option("--blas-builder", b.blas_builders,
                       "Two-level top levels: builders of the object BVHs, a row each (default: the --builder list)")
         ->delimiter(',');
@@ -186,6 +204,17 @@ int main(int argc, char** argv) {
     accuracy->add_option("--plot", ac.plot_path, "Write a PNG: distance error against coordinate magnitude");
     accuracy->add_option("--threads", threads, "Threads (0: all)")->check(CLI::Range(0, 4096));
 
+    ReproduceOptions rp;
+    CLI::App* reproduce = app.add_subcommand("reproduce", "A paper's tables measured again, written to docs/papers/PAPER.md beside the paper's figures");
+    std::string reproduce_papers;
+    for (const std::string& name : reproducible_papers()) reproduce_papers += name + ", ";
+    reproduce->add_option("paper", rp.paper, "Paper: " + reproduce_papers + "or all")->required();
+    reproduce->add_flag("--quick", rp.quick, "Smaller scenes and images, one build and one frame: minutes");
+    reproduce->add_option("--out", rp.out_dir, "Folder of PAPER.md and PAPER.json")->capture_default_str();
+    reproduce->add_option("--scenes-dir", rp.scenes_dir, "Folder of the shared scenes")->capture_default_str();
+    reproduce->add_option("--scenes", rp.scenes, "Your scenes instead of the paper's (no paper figures beside them)")->delimiter(',');
+    for (int i = 1; i < argc; ++i) rp.command += (rp.command.empty() ? "canopy " : " ") + shell_quoted(argv[i]);
+
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {  // every rank parses the same arguments: one says what is wrong
@@ -197,6 +226,8 @@ int main(int argc, char** argv) {
         if (*render) {
             r.threads = threads;
             run_render(r);
+        } else if (*reproduce) {
+            run_reproduce(rp);
         } else if (*accuracy) {
             if (distributed::is_root()) run_accuracy(ac);  // not split: under a job, rank 0's alone
         } else if (*tradeoff) {
@@ -218,6 +249,9 @@ int main(int argc, char** argv) {
                 for (const std::string& blas : b.blas_builders) check_blas_builder(blas, b.toplevels);
                 if (rebraid_option->count() && std::find(b.toplevels.begin(), b.toplevels.end(), "rebraid") == b.toplevels.end())
                     throw std::invalid_argument("--rebraid-threshold: only with --toplevel rebraid");
+                if (sa_max_option->count() && std::find(b.builders.begin(), b.builders.end(), "esc") == b.builders.end())
+                    throw std::invalid_argument("--esc-sa-max: only with --builder esc");
+                for (const std::string& value : b.esc_sa_max) parse_sa_max(value);
             });
             run_bench(bench_scenes, b);
         }

@@ -1,0 +1,36 @@
+#pragma once
+// `canopy reproduce PAPER`: a paper's tables measured again on this machine and written to docs/papers/PAPER.md
+// with the paper's printed figures beside canopy's, the command, date, machine and commit; the rows as JSON beside it.
+#include <nlohmann/json.hpp>
+
+#include <string>
+#include <vector>
+
+namespace canopy {
+
+struct ReproduceOptions {
+    std::string paper;                     // a name of reproducible_papers(), or "all"
+    bool quick = false;                    // smaller scenes and frames: minutes, for tests and a first look
+    std::string out_dir = "docs/papers";   // PAPER.md and PAPER.json go here
+    std::string scenes_dir = "../shared/scenes";
+    std::vector<std::string> scenes;       // instead of the paper's scenes (no paper figures beside them)
+    std::string command;                   // the command line, quoted in the document
+};
+
+void run_reproduce(const ReproduceOptions& options);
+std::vector<std::string> reproducible_papers();
+
+// What each paper's document says about where and when it was measured.
+struct Provenance {
+    std::string command, date, machine, commit;
+};
+Provenance provenance(const std::string& command);
+
+// A Markdown table: a header row, then rows of cells.
+std::string markdown_table(const std::vector<std::string>& header, const std::vector<std::vector<std::string>>& rows);
+std::string format(const char* fmt, double value);  // "-" for NaN
+
+// The papers, one file each (reproduce_PAPER.cpp): measure, then write `out_dir`/PAPER.md and .json.
+void reproduce_ernst_greiner_2007(const ReproduceOptions& options);
+
+}  // namespace canopy

@@ -1,0 +1,38 @@
+#!/usr/bin/env bash
+# `canopy reproduce ernst-greiner-2007 --quick` on two small scenes of one's own: the document has both settings,
+# a table per scene with the five structures (and Embree today), the matched SA_max rows grew the references to
+# their targets (1.5 and 3.5 per triangle, from below), and the computed findings; the JSON holds every row.
+# Usage: reproduce_check.sh CANOPY OUT_DIR
+set -euo pipefail
+canopy=$1 out=$2
+rm -rf "$out"
+"$canopy" reproduce ernst-greiner-2007 --quick --scenes 'gen:cylinders?tris=3000&seed=4,gen:box?tris=2000' --out "$out"
+md=$out/ernst-greiner-2007.md json=$out/ernst-greiner-2007.json
+fail() { echo "reproduce_check: $*" >&2; exit 1; }
+[ -s "$md" ] && [ -s "$json" ] || fail "no document or JSON in $out"
+for heading in "## The paper's setting" "## Today's setting" "## What holds, what does not" "## What changed since 2007"; do
+  grep -qF "$heading" "$md" || fail "missing '$heading'"
+done
+[ "$(grep -c '^### ' "$md")" -eq 4 ] || fail "expected a table per scene and setting (4)"
+[ "$(grep -c '^| bvh (binned SAH) |' "$md")" -eq 4 ] || fail "expected the plain BVH in every table"
+[ "$(grep -c '^| kd-tree |' "$md")" -eq 4 ] || fail "expected the kd-tree in every table"
+[ "$(grep -c '^| bvh ESC, automatic SA_max |' "$md")" -eq 4 ] || fail "expected ESC's automatic SA_max in every table"
+[ "$(grep -c '^| Embree medium |' "$md")" -eq 2 ] || fail "expected Embree in today's tables only"
+# The matched rows: references per triangle at most the target and within 15% of it on the sliver scene.
+awk -F'|' '/^### gen:cylinders/ { on = 1; k = 0; next } /^### / { on = 0 }
+  on && /^\| bvh ESC, SA_max / { target = k++ ? 3.5 : 1.5; refs = $3 + 0
+    if (refs > target + 1e-9 || refs < 0.85 * target) { print "refs/tri " refs " against target " target; bad = 1 }
+    if (k == 2) k = 0 }
+  END { exit bad }' "$md" || fail "matched SA_max rows missed their reference targets"
+grep -q "Written by \`canopy reproduce ernst-greiner-2007 --quick" "$md" || fail "the command is not quoted"
+/usr/bin/python3 - "$json" <<'PY' || fail "JSON rows"
+import json, sys
+doc = json.load(open(sys.argv[1]))
+for setting in ("paper", "today"):
+    assert len(doc[setting]) == 2, setting
+    for scene in doc[setting]:
+        builders = [r["builder"] for r in scene["results"] if r["accel"] == "canopy"]
+        assert builders[0] == "binned" and builders[-1] == "kdtree" and len(builders) == 5, builders
+        assert all(r["triangles_per_ray"] > 0 for r in scene["results"] if r["accel"] == "canopy")
+PY
+echo "reproduce_check: ok"
