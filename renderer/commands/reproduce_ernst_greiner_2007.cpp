@@ -111,8 +111,10 @@ std::string sa_max_for_growth(const FlatScene& flat, double target) {
         const double mid = 0.5 * (lo + hi);
         (growth(mid) > target ? lo : hi) = mid;
     }
+    // Rounded up to 3 digits for the label: a larger SA_max never cuts more, so the growth stays at most `target`.
+    const double multiple = std::exp2(hi), digit = std::pow(10.0, std::floor(std::log10(multiple)) - 2.0);
     char text[32];
-    std::snprintf(text, sizeof text, "%.3gx", std::exp2(hi));
+    std::snprintf(text, sizeof text, "%.3gx", std::ceil(multiple / digit * (1.0 + 1e-6)) * digit);
     return text;
 }
 
