@@ -13,6 +13,7 @@
 #include <fstream>
 #include <initializer_list>
 #include <sstream>
+#include <utility>
 
 namespace canopy {
 namespace {
@@ -164,10 +165,15 @@ std::string format_bytes(uint64_t bytes) {
     return text;
 }
 
+// The terms a build has (a kd-tree has no binary BVH): "61.3 GiB (scene 17.9 GiB, flat triangles 14.9 GiB, ...)".
 std::string MemoryEstimate::describe() const {
-    return format_bytes(total()) + " (scene " + format_bytes(scene) + ", flat triangles " + format_bytes(flat) +
-           ", PrimRefs " + format_bytes(references) + ", binary BVH " + format_bytes(binary) + ", traversal layout " +
-           format_bytes(layout) + ")";
+    const std::pair<const char*, uint64_t> terms[] = {{"scene", scene}, {"flat triangles", flat},
+                                                      {"references and build scratch", references},
+                                                      {"binary BVH", binary}, {"traversal layout", layout}};
+    std::string parts;
+    for (const auto& [name, bytes] : terms)
+        if (bytes) parts += (parts.empty() ? "" : ", ") + std::string(name) + " " + format_bytes(bytes);
+    return format_bytes(total()) + " (" + parts + ")";
 }
 
 MemoryAvailable available_memory(std::optional<uint64_t> limit) {

@@ -50,9 +50,14 @@ TEST_CASE("a build that does not fit is refused with the estimate and the memory
         const std::string message = e.what();
         CHECK_THAT(message, Catch::Contains("big.obj: not enough memory"));
         CHECK_THAT(message, Catch::Contains(format_bytes(estimate.total())));
-        CHECK_THAT(message, Catch::Contains("PrimRefs"));
+        CHECK_THAT(message, Catch::Contains("references and build scratch"));
+        CHECK_THAT(message, Catch::Contains("binary BVH"));
         CHECK_THAT(message, Catch::Contains(format_bytes(estimate.total() - 1) + " is available (--memory-limit)"));
     }
+    // A kd-tree has no binary BVH: its estimate does not name one.
+    const MemoryEstimate kd = estimate_for({3'000'000, 1'000'000, 1'000'000, 1}, BuildPlan{"kdtree", 2, false});
+    CHECK(kd.binary == 0);
+    CHECK_THAT(kd.describe(), !Catch::Contains("binary BVH"));
     CHECK(format_bytes(512) == "512 bytes");
     CHECK(format_bytes(3u << 20) == "3.0 MiB");
     CHECK(format_bytes(uint64_t(5) << 40) == "5.0 TiB");
