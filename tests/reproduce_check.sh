@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# `canopy reproduce ernst-greiner-2007 --quick` on two small scenes of one's own: the document has both settings,
+# `canopy reproduce ernst-greiner-2007 --quick` and `aila-karras-laine-2013 --quick` on small scenes of one's own: the document has both settings,
 # a table per scene with the five structures (and Embree today), the matched SA_max rows grew the references to
 # their targets (1.5 and 3.5 per triangle, from below), and the computed findings; the JSON holds every row.
 # Usage: reproduce_check.sh CANOPY OUT_DIR
@@ -35,4 +35,13 @@ for setting in ("paper", "today"):
         assert builders[0] == "binned" and builders[-1] == "kdtree" and len(builders) == 5, builders
         assert all(r["triangles_per_ray"] > 0 for r in scene["results"] if r["accel"] == "canopy")
 PY
+# The quality-metrics paper on two small scenes: every table and section, the nine builders, the paper's aggregates.
+"$canopy" reproduce aila-karras-laine-2013 --quick --scenes 'gen:box?tris=1500&seed=2,gen:surface?tris=1500' --out "$out"
+md=$out/aila-karras-laine-2013.md
+for heading in "## Table 1: per scene" "## Table 2: correlations over the scenes" "## Sec. 4.3" "## Sec. 4.4" "## Sec. 6" \
+               "## What holds, what does not" "| SIMD, SAH+EPO+LCV (eq. 7) |" "| average |" "| all |"; do
+  grep -qF "$heading" "$md" || fail "aila-karras-laine-2013.md: missing '$heading'"
+done
+[ "$(grep -c '^| metric | LBVH (lbvh) | BBVH (sweep) | SBVH (sbvh) | Agglo (agglo) |' "$md")" -eq 2 ] || fail "expected Table 1 per scene"
+[ "$(grep -c '^| SIMD ns/ray | [0-9]' "$md")" -eq 2 ] || fail "expected measured SIMD times"
 echo "reproduce_check: ok"

@@ -451,6 +451,27 @@ std::vector<SceneResult> study_scenes(const std::vector<std::string>& names, con
 
 namespace {
 
+nlohmann::json study_json(const std::vector<SceneResult>& results) {
+    const Fit fixed_scalar = fixed_fit(results, true, false), fixed_simd = fixed_fit(results, false, true);
+    nlohmann::json scenes = nlohmann::json::array();
+    for (const SceneResult& s : results) {
+        nlohmann::json rows = nlohmann::json::array();
+        for (const Row& r : s.rows) rows.push_back(row_json(r));
+        scenes.push_back({{"scene", s.scene}, {"builders", rows},
+                          {"correlation", {{"sah", json_or_null(s.simd_sah)}, {"sah_epo", json_or_null(s.simd_epo.correlation)},
+                                           {"sah_epo_alpha", s.simd_epo.alpha},
+                                           {"sah_epo_lcv", json_or_null(s.simd_lcv.correlation)}}},
+                          {"scalar_correlation", {{"sah", json_or_null(s.scalar_sah)},
+                                                  {"sah_epo", json_or_null(s.scalar_epo.correlation)}, {"alpha", s.scalar_epo.alpha}}},
+                          {"alpha", s.simd_lcv.alpha}, {"beta", s.simd_lcv.beta}});
+    }
+    return {{"scenes", scenes},
+            {"fixed", {{"alpha", fixed_simd.alpha}, {"beta", fixed_simd.beta},
+                       {"average_correlation", json_or_null(fixed_simd.correlation)},
+                       {"scalar_alpha", fixed_scalar.alpha},
+                       {"scalar_average_correlation", json_or_null(fixed_scalar.correlation)}}}};
+}
+
 void report_study(const std::vector<SceneResult>& results, const StudyOptions& o) {
     const Fit fixed_scalar = fixed_fit(results, true, false), fixed_simd = fixed_fit(results, false, true);
     print_tables(results, fixed_scalar, fixed_simd);
@@ -458,38 +479,32 @@ void report_study(const std::vector<SceneResult>& results, const StudyOptions& o
     if (o.permute_nodes) print_permutation_table(results);
     if (!o.plot_path.empty()) write_plot(results, o.plot_path), std::printf("wrote %s\n", o.plot_path.c_str());
     if (o.json_path.empty()) return;
-    nlohmann::json scenes = nlohmann::json::array();
-    for (const SceneResult& s : results) {
-        nlohmann::json rows = nlohmann::json::array();
-        for (const Row& r : s.rows) rows.push_back(row_json(r));
-        scenes.push_back({{"scene", s.scene}, {"builders", rows},
-                          {"correlation", {{"sah", json_or_null(s.simd_sah)}, {"sah_epo", json_or_null(s.simd_epo.correlation)},
-                                           {"sah_epo_lcv", json_or_null(s.simd_lcv.correlation)}}},
-                          {"scalar_correlation", {{"sah", json_or_null(s.scalar_sah)},
-                                                  {"sah_epo", json_or_null(s.scalar_epo.correlation)}, {"alpha", s.scalar_epo.alpha}}},
-                          {"alpha", s.simd_lcv.alpha}, {"beta", s.simd_lcv.beta}});
-    }
-    const nlohmann::json j{{"scenes", scenes},
-                           {"fixed", {{"alpha", fixed_simd.alpha}, {"beta", fixed_simd.beta},
-                                      {"average_correlation", json_or_null(fixed_simd.correlation)},
-                                      {"scalar_alpha", fixed_scalar.alpha},
-                                      {"scalar_average_correlation", json_or_null(fixed_scalar.correlation)}}}};
     std::ofstream out(o.json_path);
-    out << j.dump(2) << "\n";
+    out << study_json(results).dump(2) << "\n";
     if (!out) throw std::runtime_error(o.json_path + ": cannot write the study JSON");
     std::printf("wrote %s\n", o.json_path.c_str());
 }
 
-}  // namespace
-
-void run_study(const StudyOptions& o) {
+std::vector<std::string> builder_names_of(const StudyOptions& o) {
     std::vector<std::string> names = o.builders;
     if (names.empty())
         for (const BuilderEntry& b : builders()) names.push_back(b.name);
-    const std::vector<SceneResult> results = study_scenes(names, o);
-    distributed::checked([&] {
-        if (distributed::is_root()) report_study(results, o);
-    });
+    return names;
 }
+
+}  // namespace
+
+nlohmann::json measure_study(const StudyOptions& o) {
+    const std::vector<SceneResult> results = study_scenes(builder_names_of(o), o);
+    nlohmann::json j;
+    distributed::checked([&] {
+        if (!distributed::is_root()) return;
+        report_study(results, o);
+        j = study_json(results);
+    });
+    return j;
+}
+
+void run_study(const StudyOptions& o) { measure_study(o); }
 
 }  // namespace canopy

@@ -2,6 +2,8 @@
 // `canopy study`: the correlation study of Aila, Karras and Laine 2013 (Tables 1 and 2) for canopy's builders.
 #include "renderer/accelerator.h"
 
+#include <nlohmann/json.hpp>
+
 #include <string>
 #include <vector>
 
@@ -19,6 +21,8 @@ struct StudyOptions {
 };
 
 void run_study(const StudyOptions& options);
+// run_study's measurement and printed tables; on rank 0 also its JSON (as --json writes it), elsewhere null.
+nlohmann::json measure_study(const StudyOptions& options);
 
 // Eq. 4 of the paper: the standard deviation of the number of leaves each ray visits (closest hit).
 double leaf_count_variability(const Accelerator& accel, const std::vector<Ray>& rays);
