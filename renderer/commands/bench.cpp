@@ -333,6 +333,7 @@ nlohmann::json results_json(const std::vector<Entry>& entries, uint64_t tris) {
                            {"mrays_per_s", e.rays_per_frame() / frame / 1e3},
                            {"sah", or_null(r.sah)},
                            {"epo", or_null(r.epo)},
+                           {"layout_sah", or_null(r.layout_sah)},
                            {"nodes", or_null(r.nodes)},
                            {"leaves", or_null(r.leaves)},
                            {"refs_per_tri", or_null(r.refs_per_tri)},

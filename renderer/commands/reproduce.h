@@ -33,5 +33,6 @@ std::string format(const char* fmt, double value);  // "-" for NaN
 // The papers, one file each (reproduce_PAPER.cpp): measure, then write `out_dir`/PAPER.md and .json.
 void reproduce_ernst_greiner_2007(const ReproduceOptions& options);
 void reproduce_aila_karras_laine_2013(const ReproduceOptions& options);
+void reproduce_benthin_2017(const ReproduceOptions& options);
 
 }  // namespace canopy
