@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# `canopy reproduce ernst-greiner-2007 --quick` `aila-karras-laine-2013` and `benthin-2017` on small scenes of one's own: the document has both settings,
+# `canopy reproduce ernst-greiner-2007 --quick` `aila-karras-laine-2013`, `benthin-2017` and `ganestam-doggett-2016` on small scenes of one's own: the document has both settings,
 # a table per scene with the five structures (and Embree today), the matched SA_max rows grew the references to
 # their targets (1.5 and 3.5 per triangle, from below), and the computed findings; the JSON holds every row.
 # Usage: reproduce_check.sh CANOPY OUT_DIR
@@ -53,4 +53,12 @@ for heading in "## Table 1: SAH and frame rate" "## Table 2: build and time to i
   grep -qF "$heading" "$md" || fail "benthin-2017.md: missing '$heading'"
 done
 grep -q '^| gen:box?tris=3000&seed=3 | [0-9.]* (1.00x) | [0-9.]* (' "$md" || fail "benthin-2017.md: no measured SAH row"
+# The split-partitioning paper: its tables per scene, the thread-scaling table up to every hardware thread.
+"$canopy" reproduce ganestam-doggett-2016 --quick --scenes 'gen:cylinders?tris=3000&seed=5' --out "$out"
+md=$out/ganestam-doggett-2016.md
+for heading in "### Table 1: build and frame" "### Tables 3 and 4: splitting" "### Table 5: SAH" "## Figure 4: build time against threads" \
+               "| BONSAIS (bonsai-split) |" "| BINNEDS (sbvh) |" "| Embree high |" "| embree medium |" "| 1 thread |" \
+               "## What holds, what does not"; do
+  grep -qF "$heading" "$md" || fail "ganestam-doggett-2016.md: missing '$heading'"
+done
 echo "reproduce_check: ok"

@@ -34,5 +34,6 @@ std::string format(const char* fmt, double value);  // "-" for NaN
 void reproduce_ernst_greiner_2007(const ReproduceOptions& options);
 void reproduce_aila_karras_laine_2013(const ReproduceOptions& options);
 void reproduce_benthin_2017(const ReproduceOptions& options);
+void reproduce_ganestam_doggett_2016(const ReproduceOptions& options);
 
 }  // namespace canopy
