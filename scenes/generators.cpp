@@ -5,9 +5,9 @@
 // double and rounded to float once, so a last-bit difference of libm or of FMA contraction in a
 // double almost never reaches the stored floats.
 //
-// Triangle counts are exact for box and triangles. Cylinders (open: 2 triangles per side) and
-// surface (closed) have even counts, so an odd N gives N + 1. Below a small minimum (box 118,
-// surface 18, cylinders 6) the minimum is produced.
+// Triangle counts are exact for box, mirror and triangles. Cylinders (open: 2 triangles per side)
+// and surface (closed) have even counts, so an odd N gives N + 1. Below a small minimum (box 118,
+// mirror 144, surface 18, cylinders 6) the minimum is produced.
 #include "scenes/loaders.h"
 
 #include <glm/geometric.hpp>
@@ -64,6 +64,7 @@ void apply_query_item(GeneratorSpec& parsed, std::string_view item, std::set<std
 
 Scene generate_box(const GeneratorSpec& spec);
 Scene generate_cylinders(const GeneratorSpec& spec);
+Scene generate_mirror(const GeneratorSpec& spec);
 Scene generate_surface(const GeneratorSpec& spec);
 Scene generate_triangles(const GeneratorSpec& spec);
 
@@ -78,11 +79,12 @@ struct Generator {
 constexpr Generator kGenerators[] = {
     {"box", generate_box, 1},
     {"cylinders", generate_cylinders, 1},
+    {"mirror", generate_mirror, 1},
     {"surface", generate_surface, 1},
     {"triangles", generate_triangles, 3},
 };
-// Above every generator's count: box's minimum, cylinders' and surface's rounding up to even.
-constexpr uint64_t kMinimumTriangles = 118;
+// Above every generator's count: box's and mirror's minimum, cylinders' and surface's rounding up to even.
+constexpr uint64_t kMinimumTriangles = 144;
 constexpr uint64_t kSmallMeshVertices = 1000;  // the room's walls, a cube's edges beyond the bound
 
 const Generator* find_generator(std::string_view name) {
@@ -99,7 +101,8 @@ GeneratorSpec parse_spec(const std::string& spec) {
     const size_t question = rest.find('?');
     parsed.generator = std::string(rest.substr(0, question));
     if (!find_generator(parsed.generator))
-        spec_error(spec, "unknown generator '" + parsed.generator + "' (known: box, cylinders, surface, triangles)");
+        spec_error(spec,
+                   "unknown generator '" + parsed.generator + "' (known: box, cylinders, mirror, surface, triangles)");
     if (question == std::string_view::npos) return parsed;
     std::set<std::string> seen;
     for (std::string_view query = rest.substr(question + 1);;) {
@@ -169,21 +172,26 @@ private:
     Mesh mesh_;
 };
 
-// Picks `count` of `total` items, spread evenly, with no randomness.
+// Spreads `count` units over `total` items evenly, with no randomness: each item's share is the floor or the
+// ceiling of count / total, so with count <= total it picks `count` of the items.
 struct EvenSelection {
     uint64_t count = 0;
     uint64_t total = 1;
-    bool picks(uint64_t item) const { return (item + 1) * count / total > item * count / total; }
+    uint64_t share(uint64_t item) const { return (item + 1) * count / total - item * count / total; }
+    bool picks(uint64_t item) const { return share(item) > 0; }
 };
 
+enum class GridWrap { none, columns, both };  // both: a torus
+
 // A cols x rows grid of quads; point(i, j) maps grid coordinates to space. With wrap, the last
-// column and row join the first (a torus). Cells that `split` picks (numbered from first_cell)
-// are cut into 4 triangles about their centre instead of 2: each adds exactly 2 triangles and
-// keeps a closed surface closed, which is how closed surfaces reach an exact even count.
+// column (and with GridWrap::both the last row) joins the first. Cells that `split` picks (numbered
+// from first_cell) are cut into 4 triangles about their centre instead of 2: each adds exactly 2
+// triangles and keeps a closed surface closed, which is how closed surfaces reach an exact even count.
 template <class PointOf>
-void add_grid(MeshBuilder& mesh, uint32_t cols, uint32_t rows, bool wrap, const EvenSelection& split,
+void add_grid(MeshBuilder& mesh, uint32_t cols, uint32_t rows, GridWrap wrap, const EvenSelection& split,
               uint64_t first_cell, const PointOf& point) {
-    const uint32_t vertex_cols = wrap ? cols : cols + 1, vertex_rows = wrap ? rows : rows + 1;
+    const uint32_t vertex_cols = wrap != GridWrap::none ? cols : cols + 1;
+    const uint32_t vertex_rows = wrap == GridWrap::both ? rows : rows + 1;
     const uint32_t base = mesh.vertex_count();
     for (uint32_t j = 0; j < vertex_rows; ++j)
         for (uint32_t i = 0; i < vertex_cols; ++i) mesh.vertex(point(double(i), double(j)));
@@ -217,7 +225,7 @@ void add_cube_surface(MeshBuilder& mesh, uint32_t n, uint64_t split_cells, const
         // Swapping the free axes on the negative faces keeps every face wound outwards.
         const int u_axis = positive ? (axis + 1) % 3 : (axis + 2) % 3;
         const int v_axis = positive ? (axis + 2) % 3 : (axis + 1) % 3;
-        add_grid(mesh, n, n, false, split, uint64_t(face) * cells_per_face, [&](double i, double j) {
+        add_grid(mesh, n, n, GridWrap::none, split, uint64_t(face) * cells_per_face, [&](double i, double j) {
             dvec3 lattice;
             lattice[axis] = positive ? n : 0;
             lattice[u_axis] = i;
@@ -354,6 +362,94 @@ Scene generate_cylinders(const GeneratorSpec& spec) {
     return std::move(mesh).into_scene(spec.text, {{0, 0.9, 2.8}, {0, 0, 0}, {0, 1, 0}, 50.0f});
 }
 
+// ---- gen:mirror: a headlamp-like faceted parabolic reflector, tessellated as a CAD tessellator does it at a
+// chordal tolerance: few rings along the dish's profile and many sectors around it, so its triangles are long
+// radial slivers at every orientation about the axis, their boxes mostly empty (Ernst & Greiner 2007's "Mirror").
+
+constexpr double mirror_focal_length = 0.3;  // the dish z = r^2 / (4 f), rim radius 1, as deep as a headlamp's
+constexpr double mirror_hole = 0.2;          // the bulb's hole: no fan of needles about the axis
+constexpr double mirror_flange = 1.15;       // the flat rim's outer radius
+constexpr double mirror_depth = 1.0 / (4.0 * mirror_focal_length);  // at the rim
+// The facet counts divide it, so facet borders fall on sector lines.
+constexpr uint64_t mirror_sector_step = 24;
+constexpr uint64_t min_mirror_triangles = 6 * mirror_sector_step;  // two rings of dish, so the facets show, and the rim
+constexpr int mirror_facet_counts[] = {6, 8, 12};
+
+struct MirrorTessellation {
+    uint32_t rings, sectors;  // of the dish; the rim is one more ring
+    uint64_t rim_extra;       // triangles beyond 2 per rim cell, fewer than 2 per cell
+};
+
+// Sectors grow as N^0.2 and rings as N^0.8. A coarse tessellation is set by the angular tolerance, which the curved
+// hoop needs and the flatter profile barely does; a finer one more by the maximum edge length, which cuts the long
+// radial edges. The median sliver (longest edge over height) is 46:1 at N = 85651 (16 rings, 2424 sectors) and
+// 19:1 at N = 334080 (51 rings, 3192 sectors): binned SAH's cost falls where the splitting builders' barely does.
+MirrorTessellation mirror_tessellation(uint64_t triangles) {
+    const uint64_t wanted = std::max(triangles, min_mirror_triangles);
+    const auto steps = uint64_t(std::llround(250.0 * std::pow(double(wanted), 0.2) / mirror_sector_step));
+    const uint64_t sectors = mirror_sector_step * std::clamp<uint64_t>(steps, 1, wanted / min_mirror_triangles);
+    const uint64_t rings = wanted / (2 * sectors) - 1;  // at least 2: sectors <= wanted / 6
+    return {uint32_t(rings), uint32_t(sectors), wanted - 2 * sectors * (rings + 1)};
+}
+
+// Facets are pillows on the paraboloid, each bulging by its own amplitude; the bulge vanishes on facet borders,
+// at the hole and at the rim, so neighbouring facets meet in a crease and the dish stays one surface.
+struct MirrorDish {
+    std::vector<double> bulges;  // per facet, a fraction of the rim's depth
+    uint32_t rings, sectors;
+
+    dvec3 point(double sector, double ring) const {
+        const double per_facet = double(sectors) / double(bulges.size());
+        const double facet = std::floor(sector / per_facet), across = sector / per_facet - facet;
+        const double along = ring / rings, r = mirror_hole + (1.0 - mirror_hole) * along;
+        const double bulge = bulges[size_t(facet)] * mirror_depth * std::sin(pi * across) * std::sin(pi * along);
+        return at_angle(sector, r, r * r / (4.0 * mirror_focal_length) + bulge);
+    }
+    // Clockwise seen from the front, which winds the triangles to face the camera.
+    dvec3 at_angle(double sector, double r, double z) const {
+        const double angle = -2.0 * pi * sector / sectors;
+        return {r * std::cos(angle), r * std::sin(angle), z};
+    }
+};
+
+// The flat rim from the dish's last ring out to the flange. `extra` triangles are spread over its cells: a cell
+// taking k has k more points on its outer edge, a boundary, so the mesh stays crack-free.
+void add_mirror_rim(MeshBuilder& mesh, const MirrorDish& dish, uint32_t first_inner, uint64_t extra) {
+    const uint32_t first_outer = mesh.vertex_count();
+    for (uint32_t i = 0; i < dish.sectors; ++i) mesh.vertex(dish.at_angle(i, mirror_flange, mirror_depth));
+    const EvenSelection extras{extra, dish.sectors};
+    for (uint32_t i = 0; i < dish.sectors; ++i) {
+        const uint32_t next = (i + 1) % dish.sectors, a = first_inner + i, b = first_inner + next;
+        uint32_t previous = first_outer + next;
+        mesh.triangle(a, b, previous);
+        const auto k = uint32_t(extras.share(i));
+        for (uint32_t m = k; m >= 1; --m) {  // from the outer edge's far end back towards a's side
+            const uint32_t point = mesh.vertex(dish.at_angle(i + double(m) / (k + 1), mirror_flange, mirror_depth));
+            mesh.triangle(a, previous, point);
+            previous = point;
+        }
+        mesh.triangle(a, previous, first_outer + i);
+    }
+}
+
+Scene generate_mirror(const GeneratorSpec& spec) {
+    const MirrorTessellation tessellation = mirror_tessellation(spec.triangles);
+    Random random(spec.seed);
+    MirrorDish dish{{}, tessellation.rings, tessellation.sectors};
+    const int facets = mirror_facet_counts[random.integer(0, 2)];
+    for (int k = 0; k < facets; ++k)  // some bulge out, some in
+        dish.bulges.push_back(random.uniform(0.02, 0.06) * (random.uniform() < 0.5 ? -1.0 : 1.0));
+
+    MeshBuilder mesh;
+    mesh.begin_object("mirror");
+    add_grid(mesh, dish.sectors, dish.rings, GridWrap::columns, EvenSelection{}, 0,
+             [&](double i, double j) { return dish.point(i, j); });
+    mesh.begin_object("rim");
+    add_mirror_rim(mesh, dish, dish.rings * dish.sectors, tessellation.rim_extra);  // the grid's last ring
+    // In front of the dish, a little off its axis, the rim about filling the frame's height.
+    return std::move(mesh).into_scene(spec.text, {{0.3, 0.4, 3.2}, {0, 0, 0.35}, {0, 1, 0}, 42.0f});
+}
+
 // ---- gen:surface: a Dragon-like bumpy torus from a regular grid: compact triangles of similar size.
 
 constexpr double ring_radius = 1.0, tube_radius = 0.35;
@@ -385,7 +481,7 @@ Scene generate_surface(const GeneratorSpec& spec) {
     MeshBuilder mesh;
     mesh.begin_object("surface");
     const uint64_t base_cells = uint64_t(cols) * rows;
-    add_grid(mesh, cols, rows, true, EvenSelection{cells - base_cells, base_cells}, 0, point);
+    add_grid(mesh, cols, rows, GridWrap::both, EvenSelection{cells - base_cells, base_cells}, 0, point);
     return std::move(mesh).into_scene(spec.text, {{0, 1.7, 2.2}, {0, 0, 0}, {0, 1, 0}, 50.0f});
 }
 

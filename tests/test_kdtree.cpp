@@ -105,7 +105,8 @@ bool has_split(const KdTree& tree, int axis, float position) {
 
 TEST_CASE("the kd-tree agrees with brute force on procedural scenes", "[kdtree][oracle]") {
     const std::string specs[] = {scaled_spec("box", 12000, 3), scaled_spec("cylinders", 12000, 4),
-                                 scaled_spec("surface", 12000, 5), scaled_spec("triangles", 3000, 6)};
+                                 scaled_spec("mirror", 12000, 7), scaled_spec("surface", 12000, 5),
+                                 scaled_spec("triangles", 3000, 6)};
     for (const std::string& spec : specs) {
         const FlatScene flat = flatten(load_scene(spec));
         check_kd_against_oracle(flat.triangles, random_rays(flat.triangles, scaled(100000), 17), spec);

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <set>
 
 using namespace canopy;
 using canopy::test::input_error_of;
@@ -11,7 +12,7 @@ using Catch::Matchers::Contains;
 
 namespace {
 
-const char* const generators[] = {"box", "cylinders", "surface", "triangles"};
+const char* const generators[] = {"box", "cylinders", "mirror", "surface", "triangles"};
 
 std::string spec(const std::string& generator, uint64_t tris, uint64_t seed) {
     return "gen:" + generator + "?tris=" + std::to_string(tris) + "&seed=" + std::to_string(seed);
@@ -31,12 +32,24 @@ double median_box_to_area_ratio(const Scene& scene) {
     return ratios[ratios.size() / 2];
 }
 
+// How many triangles use each undirected edge.
+std::map<std::pair<uint32_t, uint32_t>, int> edge_uses(const Mesh& mesh) {
+    std::map<std::pair<uint32_t, uint32_t>, int> uses;
+    for (const glm::uvec3& t : mesh.triangles)
+        for (int k = 0; k < 3; ++k) {
+            const uint32_t a = t[k], b = t[(k + 1) % 3];
+            ++uses[{std::min(a, b), std::max(a, b)}];
+        }
+    return uses;
+}
+
 }  // namespace
 
 TEST_CASE("generators produce exactly N triangles where the shape allows", "[scenes][generators]") {
     for (uint64_t n : {1000u, 1001u, 12345u, 100000u}) {
         INFO("tris=" << n);
         CHECK(triangle_count(spec("box", n, 1)) == n);
+        CHECK(triangle_count(spec("mirror", n, 1)) == n);
         CHECK(triangle_count(spec("triangles", n, 1)) == n);
         // Open cylinders and closed surfaces have an even count: an odd N gives N + 1.
         CHECK(triangle_count(spec("cylinders", n, 1)) == n + n % 2);
@@ -45,6 +58,7 @@ TEST_CASE("generators produce exactly N triangles where the shape allows", "[sce
     // Below each shape's minimum, the minimum.
     CHECK(triangle_count("gen:box?tris=1") == 118);
     CHECK(triangle_count("gen:cylinders?tris=1") == 6);
+    CHECK(triangle_count("gen:mirror?tris=1") == 144);
     CHECK(triangle_count("gen:surface?tris=1") == 18);
     CHECK(triangle_count("gen:triangles?tris=1") == 1);
     CHECK(triangle_count("gen:box") == 100000);  // the default tris
@@ -109,14 +123,40 @@ TEST_CASE("gen:cylinders has long thin triangles, gen:surface compact ones", "[s
 TEST_CASE("gen:surface is closed: every edge is shared by exactly two triangles", "[scenes][generators]") {
     for (uint64_t n : {1000u, 4321u}) {
         const Mesh mesh = generate_scene(spec("surface", n, 5)).meshes[0];
-        std::map<std::pair<uint32_t, uint32_t>, int> edge_uses;
-        for (const glm::uvec3& t : mesh.triangles)
-            for (int k = 0; k < 3; ++k) {
-                const uint32_t a = t[k], b = t[(k + 1) % 3];
-                ++edge_uses[{std::min(a, b), std::max(a, b)}];
-            }
-        CHECK(std::all_of(edge_uses.begin(), edge_uses.end(), [](const auto& e) { return e.second == 2; }));
+        const std::map<std::pair<uint32_t, uint32_t>, int> uses = edge_uses(mesh);
+        CHECK(std::all_of(uses.begin(), uses.end(), [](const auto& e) { return e.second == 2; }));
     }
+}
+
+TEST_CASE("gen:mirror is one crack-free surface, open only at its hole and flange", "[scenes][generators]") {
+    for (uint64_t n : {1u, 1001u, 12347u, 85651u}) {  // the minimum; rim cells of 0 to 2 extra triangles
+        INFO("tris=" << n);
+        const Scene scene = generate_scene(spec("mirror", n, 3));
+        const Mesh& mesh = scene.meshes[0];
+        REQUIRE(mesh.objects.size() == 2);
+        CHECK(mesh.objects[0].name == "mirror");
+        CHECK(mesh.objects[1].name == "rim");
+        std::set<std::pair<uint32_t, uint32_t>> directed;
+        for (const glm::uvec3& t : mesh.triangles)
+            for (int k = 0; k < 3; ++k) REQUIRE(directed.insert({t[k], t[(k + 1) % 3]}).second);  // wound alike
+        for (const auto& [edge, uses] : edge_uses(mesh)) {
+            if (uses == 2) continue;
+            REQUIRE(uses == 1);  // a boundary edge: both ends on the hole (r 0.2) or both on the flange (r 1.15)
+            const auto at_radius = [&](uint32_t vertex, float r) {
+                return std::abs(glm::length(glm::vec2(mesh.positions[vertex])) - r) < 1e-5f;
+            };
+            CHECK(((at_radius(edge.first, 0.2f) && at_radius(edge.second, 0.2f)) ||
+                   (at_radius(edge.first, 1.15f) && at_radius(edge.second, 1.15f))));
+        }
+        for (const Triangle& t : flatten(scene).triangles) REQUIRE(triangle_area(t) > 0.0f);
+    }
+}
+
+TEST_CASE("gen:mirror's slivers are thinner in its coarse tessellation than in its fine one", "[scenes][generators]") {
+    const double coarse = median_box_to_area_ratio(generate_scene("gen:mirror?tris=20000"));
+    const double fine = median_box_to_area_ratio(generate_scene("gen:mirror?tris=80000"));
+    CHECK(coarse > 200.0);       // about 350: 4 rings of 1824 sectors
+    CHECK(fine < 0.6 * coarse);  // about 150: 15 rings of 2400 sectors
 }
 
 TEST_CASE("default_scene is a small embedded scene that load_scene(\"\") returns", "[scenes][generators]") {

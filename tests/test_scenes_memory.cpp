@@ -73,8 +73,8 @@ TEST_CASE("a generator spec is sized before anything is generated", "[scenes][me
     CHECK(seen.triangles >= 400'000'000);
     CHECK(seen.vertices >= 3 * seen.triangles);
     // Each generator's size bounds what it makes: the check sees no less than the scene holds.
-    for (const char* spec : {"gen:box?tris=5000&seed=2", "gen:cylinders?tris=5001", "gen:surface?tris=31", "gen:triangles?tris=7",
-                             "gen:box?tris=1"}) {
+    for (const char* spec : {"gen:box?tris=5000&seed=2", "gen:cylinders?tris=5001", "gen:mirror?tris=5001",
+                             "gen:surface?tris=31", "gen:triangles?tris=7", "gen:box?tris=1", "gen:mirror?tris=1"}) {
         INFO(spec);
         const Scene scene = load_scene(spec, [&](const SceneSize& size) { seen = size; });
         const SceneSize made = scene_size(scene);
