@@ -244,6 +244,42 @@ private:
     uint32_t max_depth_;
 };
 
+// A leaf's references in the builder's array and its blocks in the tree's.
+struct LeafCopy {
+    uint32_t first_ref, first_block, count;
+};
+
+// Lane `lane` of `block`: triangle `prim` of the scene, or padding (TriangleBlock's degenerate triangle at the
+// origin, prim kNone) for kNone.
+void put_lane(KdBlock& block, uint32_t lane, uint32_t prim, std::span<const Triangle> triangles) {
+    const Triangle t = prim == KdBlock::kNone ? Triangle{Vec3(0.0f), Vec3(0.0f), Vec3(0.0f)} : triangles[prim];
+    const Vec3* vertices[3] = {&t.v0, &t.v1, &t.v2};
+    for (int v = 0; v < 3; ++v)
+        for (int a = 0; a < 3; ++a) block.v[v][a][lane] = (*vertices[v])[a];
+    block.prim[lane] = prim;
+}
+
+// Re-points every leaf from its first reference to its first block and returns the blocks, leaves in node order.
+std::vector<KdBlock> leaf_blocks(std::vector<KdNode>& nodes, std::span<const uint32_t> refs, std::span<const Triangle> triangles) {
+    std::vector<LeafCopy> leaves;
+    uint32_t blocks = 0;
+    for (KdNode& node : nodes) {
+        if (!node.is_leaf()) continue;
+        leaves.push_back({node.first, blocks, node.count()});
+        node.first = blocks;
+        blocks += kd_blocks(node.count());
+    }
+    std::vector<KdBlock> out(blocks);
+    parallel::for_each(leaves.size(), 1024, [&](size_t i) {
+        const LeafCopy& leaf = leaves[i];
+        for (uint32_t lane = 0; lane < kd_blocks(leaf.count) * kKdLanes; ++lane) {
+            const uint32_t prim = lane < leaf.count ? refs[leaf.first_ref + lane] : KdBlock::kNone;
+            put_lane(out[leaf.first_block + lane / kKdLanes], lane % kKdLanes, prim, triangles);
+        }
+    });
+    return out;
+}
+
 }  // namespace
 
 KdTree build_kdtree(std::span<const Triangle> triangles, const KdSettings& settings) {
@@ -280,20 +316,19 @@ KdTree build_kdtree(std::span<const Triangle> triangles, const KdSettings& setti
     KdBuilder(triangles, settings, max_depth).build(std::move(root), built);
     tree.nodes = std::move(built.nodes);
     tree.depth = built.depth;
-    tree.leaf_triangles.resize(built.refs.size());
-    parallel::for_each(built.refs.size(), 4096, [&](size_t i) {
-        const Triangle& t = triangles[built.refs[i]];
-        tree.leaf_triangles[i] = {t.v0, t.v1, t.v2, built.refs[i]};
-    });
+    tree.leaf_blocks = leaf_blocks(tree.nodes, built.refs, triangles);
     return tree;
 }
 
 KdStats kd_stats(const KdTree& tree, uint64_t triangles) {
     KdStats s;
     s.nodes = tree.nodes.size();
-    for (const KdNode& node : tree.nodes) s.leaves += node.is_leaf();
+    for (const KdNode& node : tree.nodes) {
+        s.leaves += node.is_leaf();
+        if (node.is_leaf()) s.references += node.count();
+    }
     s.depth = tree.depth;
-    s.refs_per_triangle = triangles ? double(tree.leaf_triangles.size()) / double(triangles) : 0.0;
+    s.refs_per_triangle = triangles ? double(s.references) / double(triangles) : 0.0;
     return s;
 }
 

@@ -46,9 +46,10 @@ constexpr uint64_t leaf_bytes_per_reference(int width) {
 // for a child and in the child's merged list; the clipped box and triangle index in the node and in a child; the
 // index maps and side flag of the partition.
 constexpr uint64_t kKdBuildBytesPerReference = 3 * 6 * 12 + 2 * (sizeof(BBox) + sizeof(uint32_t)) + 2 * sizeof(uint32_t) + 1;
-// The kd-tree itself per reference: its leaf triangle, the build's reference, and nodes: a leaf per reference at
-// most, with the inner node above it, and as many again for the empty leaves the empty-space bonus cuts off.
-constexpr uint64_t kKdTreeBytesPerReference = sizeof(KdTriangle) + sizeof(uint32_t) + 4 * sizeof(KdNode);
+// The kd-tree itself per reference: a leaf block (a leaf of c references takes ceil(c / lanes) <= c blocks: a whole
+// one per reference when every leaf holds one), the build's reference, and nodes: a leaf per reference at most, with
+// the inner node above it, and as many again for the empty leaves the empty-space bonus cuts off.
+constexpr uint64_t kKdTreeBytesPerReference = sizeof(KdBlock) + sizeof(uint32_t) + 4 * sizeof(KdNode);
 // A two-level placement: its inverse and world transforms, and the top level's BRefs (re-braiding opens a
 // placement into a bounded number of them) with their share of top-level nodes.
 constexpr uint64_t kPlacementBytes = 1024;

@@ -1,8 +1,10 @@
 #pragma once
 // Front-to-back traversal of a KdTree (accel/kdtree.h), one ray at a time: the classic recursive tmin/tmax scheme
 // made iterative with a stack (Jansen 1986; the "TA_rec^B" family of Havran's thesis, appendix C), leaves tested
-// with WatertightRay (default) or MollerTrumboreRay. A Counter other than NoCount records what the ray visited, as
-// in kernels/traverse.h.
+// with WatertightRay (default) or MollerTrumboreRay a block of kKdLanes triangles at once, as the wide BVH kernels
+// test theirs (intersect_leaf in kernels/traverse.h). The block tests are the scalar tests lane for lane, ties to the
+// later lane, so a leaf's hit is the one its triangles tested in order would give. A Counter other than NoCount
+// records what the ray visited, as in kernels/traverse.h: real triangles, and the blocks' bytes, padding included.
 //
 // Robustness. The triangle tests round: a hit they report may lie off the exact ray by a few ulps of the scene's
 // extent, so outside every voxel the exact ray crosses. Each ray therefore pads its voxels by kRobustPad R in
@@ -140,13 +142,11 @@ template <Query Q, class TriangleTest = WatertightRay, class Counter = NoCount>
         counter.leaf();
         const uint32_t count = node->count();
         counter.triangles(count);
-        const KdTriangle* tris = tree.leaf_triangles.data() + node->first;
-        if (count) {
-            counter.touch(tris, sizeof(KdTriangle) * count);
-            for (uint32_t i = 0; i < count; ++i) {
-                if (test.intersect(tris[i].v0, tris[i].v1, tris[i].v2, tris[i].prim, tmin, hit) && Q == Query::Any)
-                    return true;
-            }
+        if (const uint32_t blocks = kd_blocks(count)) {
+            const KdBlock* block = tree.leaf_blocks.data() + node->first;
+            counter.touch(block, sizeof(KdBlock) * blocks);
+            for (uint32_t b = 0; b < blocks; ++b)
+                if (test.intersect_block(block[b], tmin, hit) >= 0 && Q == Query::Any) return true;
         }
         const double cut = double(hit.t) + std::abs(double(hit.t)) * kKdCullSlack;
         do {

@@ -10,6 +10,7 @@
 #include <tbb/global_control.h>
 
 #include <cstring>
+#include <unordered_map>
 
 using namespace canopy;
 using namespace canopy::test;
@@ -194,7 +195,7 @@ TEST_CASE("the reference cap bounds huge overlapping triangles, and the tree sta
         KdSettings settings;
         settings.max_references_per_triangle = cap;
         const KdTree tree = check_kd_against_oracle(tris, rays, "huge overlapping triangles, cap " + std::to_string(cap), settings);
-        CHECK(double(tree.leaf_triangles.size()) <= cap * double(tris.size()));
+        CHECK(double(kd_stats(tree, tris.size()).references) <= cap * double(tris.size()));
         CHECK(tree.depth <= kKdMaxDepth);
     }
 }
@@ -208,10 +209,97 @@ TEST_CASE("the kd-tree is the same with 1 and 2 threads", "[kdtree][determinism]
     const KdTree one = build_on(1), two = build_on(2);
     REQUIRE(one.nodes.size() == two.nodes.size());
     CHECK(std::memcmp(one.nodes.data(), two.nodes.data(), one.nodes.size() * sizeof(KdNode)) == 0);
-    REQUIRE(one.leaf_triangles.size() == two.leaf_triangles.size());
-    bool same_prims = true;
-    for (size_t i = 0; i < one.leaf_triangles.size(); ++i) same_prims &= one.leaf_triangles[i].prim == two.leaf_triangles[i].prim;
-    CHECK(same_prims);
+    REQUIRE(one.leaf_blocks.size() == two.leaf_blocks.size());
+    CHECK(std::memcmp(one.leaf_blocks.data(), two.leaf_blocks.data(), one.leaf_blocks.size() * sizeof(KdBlock)) == 0);
+}
+
+// Checks the counting kernel's leaf records: each visited leaf's count is its real triangles, not its lanes, and the
+// bytes it reads are its whole blocks.
+struct LeafCounter {
+    std::unordered_map<const KdBlock*, uint32_t> count_at;  // a non-empty leaf's first block: its triangles
+    uint32_t last_count = 0;
+    uint64_t visits = 0, wrong = 0;
+
+    explicit LeafCounter(const KdTree& tree) {
+        for (const KdNode& node : tree.nodes)
+            if (node.is_leaf() && node.count()) count_at[&tree.leaf_blocks[node.first]] = node.count();
+    }
+    void inner() {}
+    void leaf() {}
+    void triangles(uint32_t n) { last_count = n; }
+    void touch(const void* p, size_t bytes) {
+        const auto leaf = count_at.find(static_cast<const KdBlock*>(p));
+        if (leaf == count_at.end()) return;  // a node
+        ++visits;
+        wrong += leaf->second != last_count || bytes != kd_blocks(leaf->second) * sizeof(KdBlock);
+    }
+};
+
+// Every leaf's blocks: its triangles in lanes 0 to count - 1, the scene's vertices and index, then padding lanes
+// (prim kNone, a degenerate triangle at the origin); returns the references, padding not counted.
+uint64_t check_leaf_blocks(const KdTree& tree, std::span<const Triangle> tris) {
+    uint64_t references = 0, blocks = 0, wrong = 0;
+    for (const KdNode& node : tree.nodes) {
+        if (!node.is_leaf()) continue;
+        for (uint32_t lane = 0; lane < kd_blocks(node.count()) * kKdLanes; ++lane) {
+            const KdBlock& block = tree.leaf_blocks.at(node.first + lane / kKdLanes);
+            const uint32_t l = lane % kKdLanes, prim = block.prim[l];
+            const bool used = lane < node.count();
+            const Triangle t = used && prim < tris.size() ? tris[prim] : Triangle{Vec3(0), Vec3(0), Vec3(0)};
+            wrong += used ? prim >= tris.size() : prim != KdBlock::kNone;
+            const Vec3* vertices[3] = {&t.v0, &t.v1, &t.v2};
+            for (int v = 0; v < 3; ++v)
+                for (int a = 0; a < 3; ++a) wrong += block.v[v][a][l] != (*vertices[v])[a];
+        }
+        references += node.count();
+        blocks += kd_blocks(node.count());
+    }
+    CHECK(wrong == 0);
+    CHECK(blocks == tree.leaf_blocks.size());
+    CHECK(tree.bytes() == tree.nodes.size() * sizeof(KdNode) + blocks * sizeof(KdBlock));
+    return references;
+}
+
+TEST_CASE("kd leaves are SIMD blocks whose padding lanes are never hit nor counted", "[kdtree][blocks]") {
+    // Small triangles around the origin, none through it, where the padding lanes' degenerate triangles lie; rays
+    // through the origin besides random ones. A high traversal cost makes leaves of more triangles than a block's
+    // lanes, so leaves take one block, several, and part-filled ones.
+    std::mt19937_64 rng(13);
+    std::uniform_real_distribution<float> unit(-1.0f, 1.0f);
+    std::vector<Triangle> tris;
+    while (tris.size() < 3000) {
+        const Vec3 c(10.0f * unit(rng), 10.0f * unit(rng), 10.0f * unit(rng));
+        if (glm::length(c) < 2.0f) continue;
+        tris.push_back({c + 0.3f * Vec3(unit(rng), unit(rng), unit(rng)), c + 0.3f * Vec3(unit(rng), unit(rng), unit(rng)),
+                        c + 0.3f * Vec3(unit(rng), unit(rng), unit(rng))});
+    }
+    std::vector<Ray> rays = random_rays(tris, 5000, 43);
+    for (int i = 0; i < 5000; ++i) {
+        const Vec3 from = 15.0f * glm::normalize(Vec3(unit(rng), unit(rng), unit(rng)) + Vec3(1e-3f));
+        rays.push_back(i % 2 ? Ray{from, -glm::normalize(from)} : Ray{Vec3(0.0f), glm::normalize(from)});
+    }
+    for (const float traversal : {KdSettings{}.traversal, 400.0f}) {
+        KdSettings settings;
+        settings.traversal = traversal;
+        const std::string what = "blocks, K_T " + std::to_string(traversal);
+        const KdTree tree = check_kd_against_oracle(tris, rays, what, settings);
+        const uint64_t references = check_leaf_blocks(tree, tris);
+        CHECK(kd_stats(tree, tris.size()).references == references);
+        CHECK(kd_stats(tree, tris.size()).refs_per_triangle == double(references) / double(tris.size()));
+        bool part_filled = false, several = false;
+        for (const KdNode& node : tree.nodes) {
+            part_filled |= node.is_leaf() && node.count() % kKdLanes != 0;
+            several |= node.is_leaf() && node.count() > uint32_t(kKdLanes);
+        }
+        CHECK(part_filled);
+        if (traversal > KdSettings{}.traversal) CHECK(several);
+        // The counting kernel counts real triangles and reads whole blocks.
+        LeafCounter counter(tree);
+        Hit hit;
+        for (const Ray& ray : rays) traverse_kd<Query::Closest>(tree, ray, hit, counter);
+        CHECK(counter.visits > 0);
+        CHECK(counter.wrong == 0);
+    }
 }
 
 TEST_CASE("kd-tree settings outside their domain are refused", "[kdtree]") {
