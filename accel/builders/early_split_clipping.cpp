@@ -54,13 +54,18 @@ float ideal_area(const Triangle& t) {
     return std::abs(n.x) + std::abs(n.y) + std::abs(n.z);
 }
 
-// The median of A_ideal over the references' triangles (0 when there are none).
-double median_ideal_area(std::span<const Triangle> triangles, const std::vector<PrimRef>& refs) {
+// A_ideal of each reference's triangle.
+std::vector<float> ideal_areas(std::span<const Triangle> triangles, const std::vector<PrimRef>& refs) {
     std::vector<float> ideal(refs.size());
     parallel::for_each(refs.size(), 16 * 1024, [&](size_t i) { ideal[i] = ideal_area(triangles[refs[i].prim]); });
-    if (ideal.empty()) return 0.0;
-    const auto median = ideal.begin() + std::ptrdiff_t(ideal.size() / 2);
-    std::nth_element(ideal.begin(), median, ideal.end());
+    return ideal;
+}
+
+// The median of `values`, reordered (0 when empty).
+double median_of(std::vector<float>& values) {
+    if (values.empty()) return 0.0;
+    const auto median = values.begin() + std::ptrdiff_t(values.size() / 2);
+    std::nth_element(values.begin(), median, values.end());
     return *median;
 }
 
@@ -69,11 +74,12 @@ double median_ideal_area(std::span<const Triangle> triangles, const std::vector<
 float automatic_sa_max(std::span<const Triangle> triangles, const std::vector<PrimRef>& refs) {
     const size_t n = refs.size();
     if (n == 0) return std::numeric_limits<float>::infinity();
-    const double ideal_sum = parallel::sum_in_order(n, 16 * 1024, [&](size_t i) { return double(ideal_area(triangles[refs[i].prim])); });
+    std::vector<float> ideal = ideal_areas(triangles, refs);
+    const double ideal_sum = parallel::sum_in_order(n, 16 * 1024, [&](size_t i) { return double(ideal[i]); });
     const double box_sum = parallel::sum_in_order(n, 16 * 1024, [&](size_t i) { return double(refs[i].bounds().area()); });
     const double fill = box_sum > 0.0 ? ideal_sum / box_sum : 1.0;
     if (fill >= kMaxFillToSplit) return std::numeric_limits<float>::infinity();
-    const auto sa_max = float(kIdealAreasPerPiece * median_ideal_area(triangles, refs));
+    const auto sa_max = float(kIdealAreasPerPiece * median_of(ideal));
     return sa_max > 0.0f ? sa_max : std::numeric_limits<float>::infinity();  // most triangles degenerate
 }
 
@@ -156,7 +162,8 @@ float resolve_sa_max(std::span<const Triangle> triangles, const std::vector<Prim
     if (!(sa_max.value > 0.0f) || !std::isfinite(sa_max.value))
         throw std::invalid_argument("esc: SA_max must be finite and > 0, got " + std::to_string(sa_max.value));
     if (sa_max.unit == SaMax::Unit::Absolute) return sa_max.value;
-    const double area = median_ideal_area(triangles, refs);
+    std::vector<float> ideal = ideal_areas(triangles, refs);
+    const double area = median_of(ideal);
     return area > 0.0 ? float(sa_max.value * area) : std::numeric_limits<float>::infinity();
 }
 

@@ -7,10 +7,12 @@
 #include <cmath>
 #include <cstdio>
 #include <ctime>
+#include <filesystem>
 #include <fstream>
 #include <memory>
 #include <stdexcept>
 #include <thread>
+#include <utility>
 
 namespace canopy {
 namespace {
@@ -68,6 +70,26 @@ Provenance provenance(const std::string& command) {
     if (!commit.empty() && !first_line_of("git status --porcelain --untracked-files=no 2>/dev/null").empty())
         commit += " (with uncommitted changes)";
     return {command, date, machine, commit.empty() ? "unknown (not run in a git checkout)" : commit};
+}
+
+std::string provenance_text(const Provenance& where) {
+    return "Written by `" + where.command + "` on " + where.date + "; machine: " + where.machine + "; commit " +
+           where.commit + ". Do not edit: run the command again.";
+}
+
+double json_number(const nlohmann::json& row, const char* key) {
+    return row.contains(key) && row[key].is_number() ? row[key].get<double>() : kNotMeasured;
+}
+
+void write_paper(const std::string& out_dir, const std::string& paper, const std::string& markdown, const nlohmann::json& raw) {
+    std::filesystem::create_directories(out_dir);
+    for (const auto& [path, text] : {std::pair{out_dir + "/" + paper + ".md", markdown},
+                                     std::pair{out_dir + "/" + paper + ".json", raw.dump(2) + "\n"}}) {
+        std::ofstream out(path);
+        out << text;
+        if (!out) throw std::runtime_error(path + ": cannot write");
+        std::printf("wrote %s\n", path.c_str());
+    }
 }
 
 std::string markdown_table(const std::vector<std::string>& header, const std::vector<std::vector<std::string>>& rows) {

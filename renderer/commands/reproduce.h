@@ -3,6 +3,7 @@
 // with the paper's printed figures beside canopy's, the command, date, machine and commit; the rows as JSON beside it.
 #include <nlohmann/json.hpp>
 
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -25,6 +26,16 @@ struct Provenance {
     std::string command, date, machine, commit;
 };
 Provenance provenance(const std::string& command);
+// The document's first sentences: the command, date, machine and commit.
+std::string provenance_text(const Provenance& where);
+
+// A figure a paper or a run does not have (printed as "-").
+inline constexpr double kNotMeasured = std::numeric_limits<double>::quiet_NaN();
+// `key` of a JSON row as a number; kNotMeasured when absent or null.
+double json_number(const nlohmann::json& row, const char* key);
+
+// `out_dir`/`paper`.md and .json, on rank 0.
+void write_paper(const std::string& out_dir, const std::string& paper, const std::string& markdown, const nlohmann::json& raw);
 
 // A Markdown table: a header row, then rows of cells.
 std::string markdown_table(const std::vector<std::string>& header, const std::vector<std::vector<std::string>>& rows);

@@ -10,16 +10,11 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
-#include <filesystem>
-#include <fstream>
-#include <limits>
 #include <map>
 #include <stdexcept>
 
 namespace canopy {
 namespace {
-
-constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
 // The paper's builders (Table 1's columns) and canopy's names for them.
 struct Builder {
@@ -81,10 +76,6 @@ std::vector<Subject> subjects(const ReproduceOptions& o) {
             {shared("stanford-bunny")}, {shared("armadillo-decimated")}};
 }
 
-double number(const nlohmann::json& j, const char* key) {
-    return j.contains(key) && j[key].is_number() ? j[key].get<double>() : kNaN;
-}
-
 const nlohmann::json* row_of(const nlohmann::json& scene, const char* builder) {
     for (const nlohmann::json& row : scene.at("builders"))
         if (row.at("builder") == builder) return &row;
@@ -111,7 +102,7 @@ std::string table1(const nlohmann::json& scene, const PaperScene* paper) {
         std::vector<std::string> row{m.name};
         for (const Builder& b : kBuilders) {
             const nlohmann::json* r = row_of(scene, b.canopy);
-            row.push_back(r ? format(m.fmt, number(*r, m.key)) : "-");
+            row.push_back(r ? format(m.fmt, json_number(*r, m.key)) : "-");
         }
         rows.push_back(row);
         if (!m.paper) continue;
@@ -126,12 +117,12 @@ std::string correlations(const nlohmann::json& scene, const PaperScene* paper) {
     const nlohmann::json& scalar = scene.at("scalar_correlation");
     const nlohmann::json& simd = scene.at("correlation");
     std::vector<std::vector<std::string>> rows{
-        {"canopy", format("%.3f", number(scalar, "sah")),
-         format("%.3f", number(scalar, "sah_epo")) + format(" (a=%.2f)", number(scalar, "alpha")),
-         format("%.3f", number(simd, "sah")),
-         format("%.3f", number(simd, "sah_epo")) + format(" (a=%.2f)", number(simd, "sah_epo_alpha")),
-         format("%.3f", number(simd, "sah_epo_lcv")) + format(" (a=%.2f, ", number(scene, "alpha")) +
-             format("b=%.2f)", number(scene, "beta"))}};
+        {"canopy", format("%.3f", json_number(scalar, "sah")),
+         format("%.3f", json_number(scalar, "sah_epo")) + format(" (a=%.2f)", json_number(scalar, "alpha")),
+         format("%.3f", json_number(simd, "sah")),
+         format("%.3f", json_number(simd, "sah_epo")) + format(" (a=%.2f)", json_number(simd, "sah_epo_alpha")),
+         format("%.3f", json_number(simd, "sah_epo_lcv")) + format(" (a=%.2f, ", json_number(scene, "alpha")) +
+             format("b=%.2f)", json_number(scene, "beta"))}};
     if (paper)
         rows.push_back({"paper", format("%.3f", paper->scalar_sah), format("%.3f", paper->scalar_epo),
                         format("%.3f", paper->simd_sah), format("%.3f", paper->simd_epo), format("%.3f", paper->simd_lcv)});
@@ -144,8 +135,8 @@ std::vector<std::vector<double>> table2_values(const nlohmann::json& study) {
     std::vector<std::vector<double>> values(std::size(kTable2));
     for (const nlohmann::json& scene : study.at("scenes")) {
         const nlohmann::json &scalar = scene.at("scalar_correlation"), &simd = scene.at("correlation");
-        const double v[] = {number(scalar, "sah"), number(scalar, "sah_epo"), number(simd, "sah"), number(simd, "sah_epo"),
-                            number(simd, "sah_epo_lcv")};
+        const double v[] = {json_number(scalar, "sah"), json_number(scalar, "sah_epo"), json_number(simd, "sah"), json_number(simd, "sah_epo"),
+                            json_number(simd, "sah_epo_lcv")};
         for (size_t k = 0; k < std::size(kTable2); ++k)
             if (!std::isnan(v[k])) values[k].push_back(v[k]);
     }
@@ -153,14 +144,14 @@ std::vector<std::vector<double>> table2_values(const nlohmann::json& study) {
 }
 
 double average(const std::vector<double>& v) {
-    if (v.empty()) return kNaN;
+    if (v.empty()) return kNotMeasured;
     double sum = 0;
     for (double x : v) sum += x;
     return sum / double(v.size());
 }
 
-double minimum(const std::vector<double>& v) { return v.empty() ? kNaN : *std::min_element(v.begin(), v.end()); }
-double maximum(const std::vector<double>& v) { return v.empty() ? kNaN : *std::max_element(v.begin(), v.end()); }
+double minimum(const std::vector<double>& v) { return v.empty() ? kNotMeasured : *std::min_element(v.begin(), v.end()); }
+double maximum(const std::vector<double>& v) { return v.empty() ? kNotMeasured : *std::max_element(v.begin(), v.end()); }
 
 std::string table2(const nlohmann::json& study) {
     const std::vector<std::vector<double>> values = table2_values(study);
@@ -174,10 +165,10 @@ std::string table2(const nlohmann::json& study) {
 std::string fixed_fit(const nlohmann::json& study) {
     const nlohmann::json& f = study.at("fixed");
     return markdown_table({"fixed parameters for all scenes", "canopy", "paper"},
-                          {{"scalar, eq. 6", format("%.3f", number(f, "scalar_average_correlation")) +
-                                                 format(" (a=%.2f)", number(f, "scalar_alpha")), "0.980 (a=0.71)"},
-                           {"SIMD, eq. 7", format("%.3f", number(f, "average_correlation")) + format(" (a=%.2f, ", number(f, "alpha")) +
-                                               format("b=%.2f)", number(f, "beta")), "0.981 (a=0.14, b=0.76)"}});
+                          {{"scalar, eq. 6", format("%.3f", json_number(f, "scalar_average_correlation")) +
+                                                 format(" (a=%.2f)", json_number(f, "scalar_alpha")), "0.980 (a=0.71)"},
+                           {"SIMD, eq. 7", format("%.3f", json_number(f, "average_correlation")) + format(" (a=%.2f, ", json_number(f, "alpha")) +
+                                               format("b=%.2f)", json_number(f, "beta")), "0.981 (a=0.14, b=0.76)"}});
 }
 
 double change(double after, double before) { return 100.0 * (after / before - 1.0); }
@@ -193,14 +184,14 @@ Changes changes_of(const nlohmann::json& study) {
         for (const Builder& b : kBuilders) {
             const nlohmann::json* r = row_of(scene, b.canopy);
             if (!r) continue;
-            const double rotated_ns = number(*r, "rotated_simd_ns_per_ray");
+            const double rotated_ns = json_number(*r, "rotated_simd_ns_per_ray");
             if (!std::isnan(rotated_ns)) {
-                c.time[b.canopy].push_back(change(rotated_ns, number(*r, "simd_ns_per_ray")));
-                c.sah[b.canopy].push_back(change(number(*r, "rotated_sah"), number(*r, "sah")));
-                c.epo[b.canopy].push_back(change(number(*r, "rotated_epo"), number(*r, "epo")));
+                c.time[b.canopy].push_back(change(rotated_ns, json_number(*r, "simd_ns_per_ray")));
+                c.sah[b.canopy].push_back(change(json_number(*r, "rotated_sah"), json_number(*r, "sah")));
+                c.epo[b.canopy].push_back(change(json_number(*r, "rotated_epo"), json_number(*r, "epo")));
             }
-            const double permuted = number(*r, "permuted_simd_ns_per_ray");
-            if (!std::isnan(permuted)) c.permuted[b.canopy].push_back(change(permuted, number(*r, "unpermuted_simd_ns_per_ray")));
+            const double permuted = json_number(*r, "permuted_simd_ns_per_ray");
+            if (!std::isnan(permuted)) c.permuted[b.canopy].push_back(change(permuted, json_number(*r, "unpermuted_simd_ns_per_ray")));
         }
     return c;
 }
@@ -273,8 +264,7 @@ std::string findings(const nlohmann::json& study, const Changes& c) {
 std::string document(const ReproduceOptions& o, const Provenance& where, const std::vector<Subject>& list,
                      const nlohmann::json& study) {
     std::string md = "# Aila, Karras and Laine 2013: quality metrics of BVHs, measured on a CPU\n\n";
-    md += "Written by `" + where.command + "` on " + where.date + "; machine: " + where.machine + "; commit " +
-          where.commit + ". Do not edit: run the command again.";
+    md += provenance_text(where);
     if (o.quick) md += " This is a **quick** run: small scenes, small images, one timing per tree.";
     md += "\n\nThe paper measured 22 scenes on an NVIDIA GTX680 (its \"scalar\" is one lane of 32, its \"SIMD\" the "
           "32-wide warp). Here \"scalar\" is canopy's bvh2 kernel and \"SIMD\" its widest kernel on the same tree, "
@@ -299,13 +289,6 @@ std::string document(const ReproduceOptions& o, const Provenance& where, const s
     return md;
 }
 
-void write_file(const std::string& path, const std::string& text) {
-    std::ofstream out(path);
-    out << text;
-    if (!out) throw std::runtime_error(path + ": cannot write");
-    std::printf("wrote %s\n", path.c_str());
-}
-
 }  // namespace
 
 void reproduce_aila_karras_laine_2013(const ReproduceOptions& o) {
@@ -318,9 +301,7 @@ void reproduce_aila_karras_laine_2013(const ReproduceOptions& o) {
     if (o.quick) s.width = 64, s.height = 48, s.repeats = 1;
     const nlohmann::json study = measure_study(s);
     if (!distributed::is_root()) return;
-    std::filesystem::create_directories(o.out_dir);
-    write_file(o.out_dir + "/aila-karras-laine-2013.md", document(o, where, list, study));
-    write_file(o.out_dir + "/aila-karras-laine-2013.json", study.dump(2) + "\n");
+    write_paper(o.out_dir, "aila-karras-laine-2013", document(o, where, list, study), study);
 }
 
 }  // namespace canopy

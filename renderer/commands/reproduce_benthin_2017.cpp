@@ -9,15 +9,11 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
-#include <filesystem>
-#include <fstream>
-#include <limits>
 #include <stdexcept>
 
 namespace canopy {
 namespace {
 
-constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 constexpr float kPaperThreshold = 0.1f;  // sec. 4.2: open BRefs wider than 10% of the segment's extent
 constexpr float kThresholds[] = {0.01f, 0.02f, 0.05f, 0.1f, 0.2f, 0.5f, 1.0f};  // Figure 4's sweep
 
@@ -32,7 +28,7 @@ struct PaperScene {
     double tti_single, tti_two_level, tti_ours;
 };
 constexpr PaperScene kPaper[] = {
-    {"Trees", 224e3, 207e3, kNaN, 0.67, 0.99, kNaN, kNaN, 130, 145, 15, 30, kNaN, 1739, 1220},
+    {"Trees", 224e3, 207e3, kNotMeasured, 0.67, 0.99, kNotMeasured, kNotMeasured, 130, 145, 15, 30, kNotMeasured, 1739, 1220},
     {"San Miguel", 9.64, 6.29, 5.81, 1.01, 1.83, 1.90, 256, 119, 122, 1, 2.6, 782, 1109, 668},
     {"Boeing", 74.51, 50.67, 46.87, 3.42, 5.03, 5.81, 10e3, 2.5e3, 2.5e3, 37, 89, 10.2e3, 2792, 2698},
     {"Powerplant", 13.10, 10.59, 10.02, 4.17, 5.12, 5.84, 298, 186, 191, 1.6, 5.3, 469, 425, 386},
@@ -70,10 +66,6 @@ BenchOptions dynamic_options(bool quick) {
     return o;
 }
 
-double number(const nlohmann::json& j, const char* key) {
-    return j.contains(key) && j[key].is_number() ? j[key].get<double>() : kNaN;
-}
-
 // The bench row of a canopy top level and threshold, or of Embree's flat or two-level tree.
 const nlohmann::json* canopy_row(const nlohmann::json& scene, const std::string& builder, float threshold = kPaperThreshold) {
     for (const nlohmann::json& r : scene.at("results")) {
@@ -90,7 +82,7 @@ std::string rebraid_name(float threshold) {
     return threshold == kPaperThreshold ? "rebraid/binned" : text;
 }
 
-double get(const nlohmann::json* row, const char* key) { return row ? number(*row, key) : kNaN; }
+double get(const nlohmann::json* row, const char* key) { return row ? json_number(*row, key) : kNotMeasured; }
 
 // Figures of one scene, from its static bench.
 struct Measured {
@@ -103,7 +95,7 @@ struct Measured {
 };
 
 Measured measured(const nlohmann::json& scene) {
-    Measured m{scene.at("scene").get<std::string>(), {}, {}, {}, {}, kNaN, kNaN, {}, {}, {}};
+    Measured m{scene.at("scene").get<std::string>(), {}, {}, {}, {}, kNotMeasured, kNotMeasured, {}, {}, {}};
     const nlohmann::json* rows[3] = {canopy_row(scene, "two-level/binned"), canopy_row(scene, "rebraid/binned"),
                                      canopy_row(scene, "binned")};
     for (int k = 0; k < 3; ++k) {
@@ -113,7 +105,7 @@ Measured measured(const nlohmann::json& scene) {
     for (const nlohmann::json& r : scene.at("results")) {
         if (r.at("accel") != "embree") continue;
         // Embree's rows come flat first, then its two-level tree (bench.cpp make_entries).
-        (std::isnan(m.embree_flat_frame) ? m.embree_flat_frame : m.embree_two_level_frame) = number(r, "frame_ms_mean");
+        (std::isnan(m.embree_flat_frame) ? m.embree_flat_frame : m.embree_two_level_frame) = json_number(r, "frame_ms_mean");
     }
     for (const float t : kThresholds) {
         const nlohmann::json* r = canopy_row(scene, "rebraid/binned", t);
@@ -181,9 +173,9 @@ std::string table3(const std::vector<nlohmann::json>& dynamic) {
         for (const nlohmann::json& r : scene.at("results")) {
             const std::string builder = r.at("builder");
             if (builder != "binned" && builder != "lbvh" && builder != "two-level/binned" && builder != "rebraid/binned") continue;
-            rows.push_back({scene.at("scene").get<std::string>() + ": " + builder, format("%.2f", number(r, "rebuild_ms_mean")),
-                            format("%.2f", number(r, "render_ms_mean")), format("%.2f", number(r, "total_ms_mean")),
-                            two_level ? format("%.2fx", number(r, "total_ms_mean") / number(*two_level, "total_ms_mean")) : "-"});
+            rows.push_back({scene.at("scene").get<std::string>() + ": " + builder, format("%.2f", json_number(r, "rebuild_ms_mean")),
+                            format("%.2f", json_number(r, "render_ms_mean")), format("%.2f", json_number(r, "total_ms_mean")),
+                            two_level ? format("%.2fx", json_number(r, "total_ms_mean") / json_number(*two_level, "total_ms_mean")) : "-"});
         }
     }
     rows.push_back({"paper San Miguel: single (binned)", "256", "13", "269", "8.18x"});
@@ -214,13 +206,6 @@ std::string findings(const std::vector<Measured>& ms) {
            "threshold of the sweep: " + best_threshold + " (paper: 10% close to optimal for all its scenes).\n";
 }
 
-void write_file(const std::string& path, const std::string& text) {
-    std::ofstream out(path);
-    out << text;
-    if (!out) throw std::runtime_error(path + ": cannot write");
-    std::printf("wrote %s\n", path.c_str());
-}
-
 }  // namespace
 
 void reproduce_benthin_2017(const ReproduceOptions& o) {
@@ -232,8 +217,7 @@ void reproduce_benthin_2017(const ReproduceOptions& o) {
     std::vector<Measured> ms;
     for (const nlohmann::json& scene : statics) ms.push_back(measured(scene));
     std::string md = "# Benthin et al. 2017: two-level BVHs with partial re-braiding\n\n";
-    md += "Written by `" + where.command + "` on " + where.date + "; machine: " + where.machine + "; commit " +
-          where.commit + ". Do not edit: run the command again.";
+    md += provenance_text(where);
     if (o.quick) md += " This is a **quick** run: small images, one build and one frame.";
     md += "\n\nThe paper measured Embree 2.15 on a dual Xeon E5-2699 v3 (36 cores) with scenes that are not public. "
           "canopy measures its own top levels over binned SAH object trees (one object per OBJ group, bench "
@@ -250,9 +234,7 @@ void reproduce_benthin_2017(const ReproduceOptions& o) {
           "frame; each frame's rebuild and a primary-ray frame are timed.\n\n" + table3(dynamic) + "\n";
     md += "## What holds, what does not\n\n" + findings(ms);
     nlohmann::json raw{{"static", statics}, {"dynamic", dynamic}};
-    std::filesystem::create_directories(o.out_dir);
-    write_file(o.out_dir + "/benthin-2017.md", md);
-    write_file(o.out_dir + "/benthin-2017.json", raw.dump(2) + "\n");
+    write_paper(o.out_dir, "benthin-2017", md, raw);
 }
 
 }  // namespace canopy

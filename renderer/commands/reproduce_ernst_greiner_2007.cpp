@@ -15,16 +15,11 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
-#include <filesystem>
-#include <fstream>
-#include <limits>
 #include <optional>
 #include <stdexcept>
 
 namespace canopy {
 namespace {
-
-constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
 // A row of Table 1 as printed: memory relative to the plain BVH, build time (s), inner nodes and triangles
 // visited per ray, time for the 1000 x 1000 primary rays (s), speed-up over the plain BVH. The text in
@@ -154,10 +149,6 @@ BenchOptions bench_options(const Setting& setting, const std::vector<std::string
     return o;
 }
 
-double number(const nlohmann::json& row, const char* key) {
-    return row.contains(key) && row[key].is_number() ? row[key].get<double>() : kNaN;
-}
-
 // One structure's figures from a bench row.
 struct Measured {
     std::string label, sa_max;
@@ -173,9 +164,9 @@ std::vector<Measured> measured_rows(const nlohmann::json& scene) {
         const std::string sa_max = r.at("esc_sa_max").is_string() ? r.at("esc_sa_max").get<std::string>() : "";
         std::string label = builder == "binned" ? "bvh (binned SAH)" : builder == "kdtree" ? "kd-tree" : builder;
         if (!sa_max.empty()) label = sa_max == "auto" ? "bvh ESC, automatic SA_max" : "bvh ESC, SA_max " + sa_max;
-        rows.push_back({label, sa_max, embree ? kNaN : number(r, "refs_per_tri"), number(r, "bytes"),
-                        number(r, "build_ms_min") / 1e3, number(r, "inner_per_ray"), number(r, "triangles_per_ray"),
-                        number(r, "frame_ms_mean") / 1e3, builder == "kdtree", embree});
+        rows.push_back({label, sa_max, embree ? kNotMeasured : json_number(r, "refs_per_tri"), json_number(r, "bytes"),
+                        json_number(r, "build_ms_min") / 1e3, json_number(r, "inner_per_ray"), json_number(r, "triangles_per_ray"),
+                        json_number(r, "frame_ms_mean") / 1e3, builder == "kdtree", embree});
     }
     return rows;
 }
@@ -330,8 +321,7 @@ std::string changes(const std::vector<Subject>& subjects, const std::vector<Sett
 std::string document(const ReproduceOptions& o, const Provenance& where, const std::vector<Subject>& subjects,
                      const std::vector<std::vector<std::string>>& sa_max, const std::vector<SettingResult>& results) {
     std::string md = "# Ernst and Greiner 2007, Table 1: early split clipping against a plain BVH and a kd-tree\n\n";
-    md += "Written by `" + where.command + "` on " + where.date + "; machine: " + where.machine + "; commit " +
-          where.commit + ". Do not edit: run the command again.";
+    md += provenance_text(where);
     if (o.quick) md += " This is a **quick** run: smaller stand-in scenes, smaller images, one build and one frame.";
     md += "\n\nThe paper (../shared/papers/ernst-greiner-2007-early-split-clipping.txt, sec. 6) measured on one core of "
           "a 2.16 GHz Core 2 Duo: scalar single rays, one primary ray per pixel at 1000 x 1000. Its scenes are not "
@@ -357,13 +347,6 @@ std::string document(const ReproduceOptions& o, const Provenance& where, const s
     md += "## What holds, what does not\n\n" + findings(subjects, results);
     md += "## What changed since 2007\n\n" + changes(subjects, results);
     return md;
-}
-
-void write_file(const std::string& path, const std::string& text) {
-    std::ofstream out(path);
-    out << text;
-    if (!out) throw std::runtime_error(path + ": cannot write");
-    std::printf("wrote %s\n", path.c_str());
 }
 
 }  // namespace
@@ -392,9 +375,7 @@ void reproduce_ernst_greiner_2007(const ReproduceOptions& o) {
         results.push_back(std::move(result));
     }
     if (!distributed::is_root()) return;
-    std::filesystem::create_directories(o.out_dir);
-    write_file(o.out_dir + "/ernst-greiner-2007.md", document(o, where, list, sa_max, results));
-    write_file(o.out_dir + "/ernst-greiner-2007.json", raw.dump(2) + "\n");
+    write_paper(o.out_dir, "ernst-greiner-2007", document(o, where, list, sa_max, results), raw);
 }
 
 }  // namespace canopy

@@ -9,16 +9,11 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
-#include <filesystem>
-#include <fstream>
-#include <limits>
 #include <stdexcept>
 #include <thread>
 
 namespace canopy {
 namespace {
-
-constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
 // Table 1's builders in its order, and canopy's builder for each.
 struct Builder {
@@ -40,18 +35,18 @@ struct PaperScene {
     double sah[kCount];       // Table 5, in Table 1's builder order
 };
 constexpr PaperScene kSibenik{"Sibenik (79,380 triangles)",
-                              {49, 9, 7, 53, 11, 14, kNaN},
+                              {49, 9, 7, 53, 11, 14, kNotMeasured},
                               {222, 225, 222, 222, 221, 221, 221},
                               {19, 46, 29}, 4, 36,
                               {15.03, 14.59, 14.78, 14.38, 14.06, 16.02, 13.45}};
 constexpr PaperScene kSponza{"Sponza (262,267 triangles)",
-                             {178, 22, 22, 213, 29, 56, kNaN},
-                             {1210, 1137, kNaN, 1224, 1057, 1244, kNaN},
+                             {178, 22, 22, 213, 29, 56, kNotMeasured},
+                             {1210, 1137, kNotMeasured, 1224, 1057, 1244, kNotMeasured},
                              {23, 45, 25}, 8, 28,
                              {22.53, 22.61, 24.59, 22.25, 20.78, 29.26, 21.65}};
 constexpr PaperScene kPowerPlant{"Power Plant (12,759,246 triangles)",
-                                 {14347, 1261, 1311, 17603, 1881, 3625, kNaN},
-                                 {617, 606, 700, 469, 437, 606, kNaN},
+                                 {14347, 1261, 1311, 17603, 1881, 3625, kNotMeasured},
+                                 {617, 606, 700, 469, 437, 606, kNotMeasured},
                                  {19, 47, 50}, 844, 45,
                                  {10.02, 9.83, 10.67, 8.34, 8.17, 9.37, 7.32}};
 
@@ -101,10 +96,6 @@ BenchOptions scaling_options(bool quick) {
     return o;
 }
 
-double number(const nlohmann::json& j, const char* key) {
-    return j.contains(key) && j[key].is_number() ? j[key].get<double>() : kNaN;
-}
-
 const nlohmann::json* row_of(const nlohmann::json& scene, const std::string& builder, int threads = -1) {
     for (const nlohmann::json& r : scene.at("results")) {
         const std::string name = r.at("accel") == "embree" ? "embree " + r.at("quality").get<std::string>() : r.at("builder").get<std::string>();
@@ -113,7 +104,7 @@ const nlohmann::json* row_of(const nlohmann::json& scene, const std::string& bui
     return nullptr;
 }
 
-double get(const nlohmann::json* row, const char* key) { return row ? number(*row, key) : kNaN; }
+double get(const nlohmann::json* row, const char* key) { return row ? json_number(*row, key) : kNotMeasured; }
 
 std::string percent_of(double v, double base) {
     return std::isnan(v) ? "-" : format("%.0f", v) + (std::isnan(base) ? "" : format(" [%.0f%%]", 100.0 * v / base));
@@ -125,7 +116,7 @@ std::string table1(const nlohmann::json& scene, const PaperScene* p) {
     for (size_t i = 0; i < kCount; ++i) {
         const nlohmann::json* r = row_of(scene, kBuilders[i].canopy);
         rows.push_back({std::string(kBuilders[i].paper) + " (" + kBuilders[i].canopy + ")", format("%.1f", get(r, "build_ms_min")),
-                        p ? percent_of(p->build_ms[i], kNaN) : "-", percent_of(get(r, "frame_ms_mean"), sweep_frame),
+                        p ? percent_of(p->build_ms[i], kNotMeasured) : "-", percent_of(get(r, "frame_ms_mean"), sweep_frame),
                         p ? percent_of(p->frame_ms[i], p->frame_ms[0]) : "-"});
     }
     for (const char* embree : {"embree medium", "embree high"}) {
@@ -191,18 +182,11 @@ std::string findings(const std::vector<Subject>& list, const std::vector<nlohman
         gains += ", built in " + format("%.2fx", split_build / sbvh_build) + " of BINNEDS's (sbvh) time";
         const nlohmann::json* best = nullptr;
         for (const nlohmann::json& r : scene.at("results"))
-            if (r.at("accel") == "canopy" && (!best || number(r, "frame_ms_mean") < number(*best, "frame_ms_mean"))) best = &r;
+            if (r.at("accel") == "canopy" && (!best || json_number(r, "frame_ms_mean") < json_number(*best, "frame_ms_mean"))) best = &r;
         if (best) fastest += (fastest.empty() ? "" : ", ") + name + " " + best->at("builder").get<std::string>();
     }
     return "Split partitioning (BONSAIS against BONSAI): " + gains + ". Fastest frames among canopy's builders: " +
            fastest + " (paper: BONSAIS or BINNEDS on every scene where splitting pays).\n";
-}
-
-void write_file(const std::string& path, const std::string& text) {
-    std::ofstream out(path);
-    out << text;
-    if (!out) throw std::runtime_error(path + ": cannot write");
-    std::printf("wrote %s\n", path.c_str());
 }
 
 }  // namespace
@@ -216,8 +200,7 @@ void reproduce_ganestam_doggett_2016(const ReproduceOptions& o) {
     const std::vector<nlohmann::json> scaling = measure_bench({specs.back()}, scaling_options(o.quick));
     if (!distributed::is_root()) return;
     std::string md = "# Ganestam and Doggett 2016: SAH guided spatial split partitioning\n\n";
-    md += "Written by `" + where.command + "` on " + where.date + "; machine: " + where.machine + "; commit " +
-          where.commit + ". Do not edit: run the command again.";
+    md += provenance_text(where);
     if (o.quick) md += " This is a **quick** run: small images, one build and one frame.";
     md += "\n\nThe paper measured Embree 2.x's 8-wide BVH and path tracer on a quad-core Intel 4850HQ laptop (Figure 4 on "
           "a dual 12-core E5-2643 v3). canopy measures its own builders for the paper's seven (bench protocol, all "
@@ -237,9 +220,7 @@ void reproduce_ganestam_doggett_2016(const ReproduceOptions& o) {
           "than BONSAIS, whose build stays close to BINNEDSAH's.\n\n" + figure4(scaling.at(0)) + "\n";
     md += "## What holds, what does not\n\n" + findings(list, tables);
     nlohmann::json raw{{"tables", tables}, {"scaling", scaling}};
-    std::filesystem::create_directories(o.out_dir);
-    write_file(o.out_dir + "/ganestam-doggett-2016.md", md);
-    write_file(o.out_dir + "/ganestam-doggett-2016.json", raw.dump(2) + "\n");
+    write_paper(o.out_dir, "ganestam-doggett-2016", md, raw);
 }
 
 }  // namespace canopy
