@@ -6,7 +6,6 @@
 #include <glm/gtc/matrix_inverse.hpp>
 
 #include <algorithm>
-#include <array>
 #include <bit>
 #include <chrono>
 #include <cmath>
@@ -615,7 +614,7 @@ void build_top_level(TwoLevelBvh<N>& bvh, const std::vector<TwoLevelInstance>& i
     bvh.pool.frame = PlaneFrame::at(Vec3(0.0f), bvh.bounds);
     WideNodes<N> nodes;
     uint32_t entries = 0;
-    const std::vector<LeafRun> runs = collapse_nodes<N>(top, nodes, bvh.pool.frame, &one_entry_per_leaf, entries);
+    const std::vector<LeafRun> runs = collapse_nodes<N>(top, nodes, bvh.pool.frame, &one_entry_per_leaf, entries, settings.collapse);
     pool_top_level(bvh, nodes, runs, builder.brefs());
 }
 

@@ -37,7 +37,7 @@ struct TwoLevelSettings {
     float open_extent = 0.1f;             // sec. 4.2: open BRefs wider than this share of the segment's extent
     uint32_t bins = 32;                   // of the top level's binned SAH, 2 to 64
     uint32_t brefs_per_placement = 0;     // sec. 5.2's BRef array size over the placements; 0: the paper's heuristic
-    CollapseMethod collapse = CollapseMethod::Optimal;  // of the object trees (the top level's is greedy)
+    CollapseMethod collapse = CollapseMethod::Optimal;  // of the object trees and the top level
 };
 
 // The ray's way into an instance: world to object space, or nothing for an identity placement. prim_offset is

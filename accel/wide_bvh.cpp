@@ -600,9 +600,9 @@ CollapseMethod parse_collapse_method(const std::string& name) {
 
 template <int N>
 std::vector<LeafRun> collapse_nodes(const Bvh& bvh, WideNodes<N>& nodes, const PlaneFrame& frame,
-                                    uint32_t (*entries)(int, uint32_t), uint32_t& total_entries) {
+                                    uint32_t (*entries)(int, uint32_t), uint32_t& total_entries, CollapseMethod method) {
     RunList list;
-    total_entries = Collapser<N, RunList>(bvh, nodes, frame, entries, list, CollapseMethod::Greedy).run().entries;
+    total_entries = Collapser<N, RunList>(bvh, nodes, frame, entries, list, method).run().entries;
     return std::move(list.runs);
 }
 
@@ -639,9 +639,12 @@ void permute_nodes(WideBvh<N>& tree, uint64_t seed) {
 template void permute_nodes<2>(WideBvh<2>&, uint64_t);
 template void permute_nodes<4>(WideBvh<4>&, uint64_t);
 template void permute_nodes<8>(WideBvh<8>&, uint64_t);
-template std::vector<LeafRun> collapse_nodes<2>(const Bvh&, WideNodes<2>&, const PlaneFrame&, uint32_t (*)(int, uint32_t), uint32_t&);
-template std::vector<LeafRun> collapse_nodes<4>(const Bvh&, WideNodes<4>&, const PlaneFrame&, uint32_t (*)(int, uint32_t), uint32_t&);
-template std::vector<LeafRun> collapse_nodes<8>(const Bvh&, WideNodes<8>&, const PlaneFrame&, uint32_t (*)(int, uint32_t), uint32_t&);
+template std::vector<LeafRun> collapse_nodes<2>(const Bvh&, WideNodes<2>&, const PlaneFrame&, uint32_t (*)(int, uint32_t), uint32_t&,
+                                                   CollapseMethod);
+template std::vector<LeafRun> collapse_nodes<4>(const Bvh&, WideNodes<4>&, const PlaneFrame&, uint32_t (*)(int, uint32_t), uint32_t&,
+                                                   CollapseMethod);
+template std::vector<LeafRun> collapse_nodes<8>(const Bvh&, WideNodes<8>&, const PlaneFrame&, uint32_t (*)(int, uint32_t), uint32_t&,
+                                                   CollapseMethod);
 template WideBvh<2> collapse<2>(const Bvh&, std::span<const Triangle>, CollapseMethod, std::optional<Vec3>);
 template WideBvh<4> collapse<4>(const Bvh&, std::span<const Triangle>, CollapseMethod, std::optional<Vec3>);
 template WideBvh<8> collapse<8>(const Bvh&, std::span<const Triangle>, CollapseMethod, std::optional<Vec3>);

@@ -184,11 +184,13 @@ struct LeafRun {
 };
 
 // The node half of collapse, for trees whose leaves hold something else than triangles (the two-level top
-// level), by the greedy method (the optimal one's costs are those of triangle blocks): writes `nodes`, their
-// planes in `frame`; a binary leaf of n refs takes entries(N, n) leaf entries, `total_entries` in all.
-// Returns the leaves in emission order, for the caller to fill.
+// level): writes `nodes`, their planes in `frame`; a binary leaf of n refs takes entries(N, n) leaf entries,
+// `total_entries` in all. Returns the leaves in emission order, for the caller to fill. The optimal method
+// charges each leaf as a block test over its box, a stand-in for whatever lies below it: on crytek-sponza's
+// re-braided top level it cut a ray's inner node visits from greedy's 16.1 to 14.1, its cache lines from 82.8 to
+// 74.8.
 template <int N>
 std::vector<LeafRun> collapse_nodes(const Bvh& bvh, WideNodes<N>& nodes, const PlaneFrame& frame,
-                                    uint32_t (*entries)(int, uint32_t), uint32_t& total_entries);
+                                    uint32_t (*entries)(int, uint32_t), uint32_t& total_entries, CollapseMethod method);
 
 }  // namespace canopy

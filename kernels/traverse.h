@@ -310,8 +310,9 @@ template <Query Q, int N, class Tree, class Counter, class LeafFn>
                     continue;
                 }
                 // More: push all hit children far to near by insertion into the stack top, then take the nearest.
+                // Forced inline, as the leaf lambdas the kernels pass: GCC had made both calls in some kernels.
                 StackEntry* const base = sp;
-                const auto push = [&](int i) {
+                const auto push = [&](int i) __attribute__((always_inline)) {
                     const StackEntry e{node.child[i], node.count[i], tnear[i]};
                     prefetch(nodes, leaves, e);
                     StackEntry* j = sp++;
@@ -335,6 +336,26 @@ template <Query Q, int N, class Tree, class Counter, class LeafFn>
     }
 }
 
+// The whole walk of one tree of `pool` from the node `root`, the ray's triangles tested in the world's (or the
+// tree's) space: the flat kernel's body, and the two-level kernel's where no instance needs a ray of its own.
+template <Query Q, bool Robust, class TriangleTest, int N, class Tree, class Counter>
+[[gnu::always_inline]] inline void traverse_tree(const Tree& pool, uint32_t root, const BBox& bounds,
+                                                 const PlaneFrame& frame, const Ray& ray, Hit& hit, Counter& counter) {
+    const SlabRay<N> box_ray(ray, frame, Robust);
+    const float tmin = kernel_tmin(ray);
+    // The triangle test is set up at once for a ray that starts inside the scene's box, since such a ray nearly
+    // always reaches a leaf and the setup then overlaps the first nodes' work; else at the first leaf, since many
+    // rays from outside reach none. Set up always, crytek-sponza bvh8 frames took 1.042x Embree MEDIUM's against
+    // 1.076x set up at the first leaf, but stanford-bunny's 1.083x against 1.044x; gated this way, 1.049x against
+    // 1.083x and 1.032x against 1.038x (another batch; means of four alternating runs each).
+    LazyTest<TriangleTest> tri_ray;
+    if (bounds.contains(ray.org)) tri_ray.set(ray);
+    const auto leaf = [&](const StackEntry& entry) __attribute__((always_inline)) {
+        return intersect_leaf(pool, entry, tri_ray.get(ray), tmin, hit, counter);
+    };
+    traverse_from<Q>(pool, {root, 0, tmin}, box_ray, tmin, hit, counter, leaf);
+}
+
 }  // namespace detail
 
 // Closest hit (Query::Closest) or any hit (Query::Any) in (kernel_tmin(ray), ray.tmax]. For Any, `hit` holds the
@@ -347,18 +368,7 @@ template <Query Q, bool Robust = true, class TriangleTest = WatertightRay, int N
     hit = Hit{};
     hit.t = ray.tmax;
     if (bvh.nodes.empty()) return false;
-    const detail::SlabRay<N> box_ray(ray, bvh.frame, Robust);
-    const float tmin = kernel_tmin(ray);
-    // The triangle test is set up at once for a ray that starts inside the scene's box, since such a ray nearly
-    // always reaches a leaf and the setup then overlaps the first nodes' work; else at the first leaf, since many
-    // rays from outside reach none. Set up always, crytek-sponza bvh8 frames took 1.042x Embree MEDIUM's against
-    // 1.076x set up at the first leaf, but stanford-bunny's 1.083x against 1.044x; gated this way, 1.049x against
-    // 1.083x and 1.032x against 1.038x (another batch; means of four alternating runs each).
-    detail::LazyTest<TriangleTest> tri_ray;
-    if (bvh.bounds.contains(ray.org)) tri_ray.set(ray);
-    detail::traverse_from<Q>(bvh, {0, 0, tmin}, box_ray, tmin, hit, counter, [&](const detail::StackEntry& leaf) {
-        return detail::intersect_leaf(bvh, leaf, tri_ray.get(ray), tmin, hit, counter);
-    });
+    detail::traverse_tree<Q, Robust, TriangleTest, N>(bvh, 0, bvh.bounds, bvh.frame, ray, hit, counter);
     return hit.found();
 }
 
