@@ -5,8 +5,8 @@
 // double and rounded to float once, so a last-bit difference of libm or of FMA contraction in a
 // double almost never reaches the stored floats.
 //
-// Triangle counts are exact for box, mirror and triangles. Cylinders (open: 2 triangles per side)
-// and surface (closed) have even counts, so an odd N gives N + 1. Below a small minimum (box 118,
+// Triangle counts are exact for box, city, foliage, mirror and triangles. Cylinders (open: 2 triangles per side)
+// and surface (closed) have even counts, so an odd N gives N + 1. Below a small minimum (box 118, city 12, foliage 14,
 // mirror 144, surface 18, cylinders 6) the minimum is produced.
 #include "scenes/loaders.h"
 
@@ -63,7 +63,9 @@ void apply_query_item(GeneratorSpec& parsed, std::string_view item, std::set<std
 }
 
 Scene generate_box(const GeneratorSpec& spec);
+Scene generate_city(const GeneratorSpec& spec);
 Scene generate_cylinders(const GeneratorSpec& spec);
+Scene generate_foliage(const GeneratorSpec& spec);
 Scene generate_mirror(const GeneratorSpec& spec);
 Scene generate_surface(const GeneratorSpec& spec);
 Scene generate_triangles(const GeneratorSpec& spec);
@@ -78,7 +80,9 @@ struct Generator {
 
 constexpr Generator kGenerators[] = {
     {"box", generate_box, 1},
+    {"city", generate_city, 2},
     {"cylinders", generate_cylinders, 1},
+    {"foliage", generate_foliage, 2},
     {"mirror", generate_mirror, 1},
     {"surface", generate_surface, 1},
     {"triangles", generate_triangles, 3},
@@ -102,7 +106,8 @@ GeneratorSpec parse_spec(const std::string& spec) {
     parsed.generator = std::string(rest.substr(0, question));
     if (!find_generator(parsed.generator))
         spec_error(spec,
-                   "unknown generator '" + parsed.generator + "' (known: box, cylinders, mirror, surface, triangles)");
+                   "unknown generator '" + parsed.generator +
+                       "' (known: box, city, cylinders, foliage, mirror, surface, triangles)");
     if (question == std::string_view::npos) return parsed;
     std::set<std::string> seen;
     for (std::string_view query = rest.substr(question + 1);;) {
@@ -125,6 +130,7 @@ public:
     }
     double uniform() { return double(next() >> 11) * 0x1.0p-53; }  // [0, 1), every value exact
     double uniform(double lo, double hi) { return lo + (hi - lo) * uniform(); }
+    double log_uniform(double lo, double hi) { return lo * std::exp(std::log(hi / lo) * uniform()); }
     int integer(int lo, int hi) { return lo + int(next() % uint64_t(hi - lo + 1)); }  // inclusive
     dvec3 point_in_box(double lo, double hi) { return {uniform(lo, hi), uniform(lo, hi), uniform(lo, hi)}; }
     dvec3 direction() {  // uniform on the unit sphere
@@ -157,6 +163,18 @@ public:
         mesh_.objects.push_back({std::move(name), uint32_t(mesh_.triangles.size()), 0});
     }
     uint32_t vertex_count() const { return uint32_t(mesh_.positions.size()); }
+    BBox bounds() const {
+        BBox box;
+        for (const Vec3& p : mesh_.positions) box.extend(p);
+        return box;
+    }
+    // A camera on the view from `eye_offset` (in units of the largest extent) looking at the bounds' centre.
+    Camera camera_at(const dvec3& eye_offset) const {
+        const BBox box = bounds();
+        const Vec3 center = box.center(), extent = box.upper - box.lower;
+        const float size = std::max({extent.x, extent.y, extent.z});
+        return {center + Vec3(eye_offset) * size, center, {0, 1, 0}, 50.0f};
+    }
 
     Scene into_scene(const std::string& name, const Camera& camera) && {
         Scene scene;
@@ -317,18 +335,22 @@ Scene generate_box(const GeneratorSpec& spec) {
 
 // ---- gen:cylinders: a Power-Plant-like tangle of long, thin, open cylinders in [-1, 1]^3.
 
-void add_cylinder(MeshBuilder& mesh, Random& random, const dvec3& center, double spacing, uint32_t sides) {
-    const double length = std::min(random.uniform(3.0, 10.0) * spacing, 2.0);
-    const double radius = length * random.uniform(1.0 / 60.0, 1.0 / 25.0);
-    const dvec3 axis = random.direction();
+// Two unit vectors perpendicular to the unit vector `axis` and to each other.
+std::pair<dvec3, dvec3> perpendiculars(const dvec3& axis) {
     const dvec3 helper = std::abs(axis.x) < 0.9 ? dvec3(1, 0, 0) : dvec3(0, 1, 0);
-    const dvec3 u = glm::normalize(glm::cross(axis, helper)), w = glm::cross(axis, u);
+    const dvec3 u = glm::normalize(glm::cross(axis, helper));
+    return {u, glm::cross(axis, u)};
+}
+
+// An open tube of `sides` quads (2 sides triangles) from `from` to `to`.
+void add_tube(MeshBuilder& mesh, const dvec3& from, const dvec3& to, double radius, uint32_t sides) {
+    const auto [u, w] = perpendiculars(glm::normalize(to - from));
     const uint32_t base = mesh.vertex_count();
     for (uint32_t k = 0; k < sides; ++k) {
         const double angle = 2.0 * pi * k / sides;
         const dvec3 offset = radius * (std::cos(angle) * u + std::sin(angle) * w);
-        mesh.vertex(center - 0.5 * length * axis + offset);
-        mesh.vertex(center + 0.5 * length * axis + offset);
+        mesh.vertex(from + offset);
+        mesh.vertex(to + offset);
     }
     for (uint32_t k = 0; k < sides; ++k) {
         const uint32_t bottom = base + 2 * k, top = bottom + 1;
@@ -336,6 +358,13 @@ void add_cylinder(MeshBuilder& mesh, Random& random, const dvec3& center, double
         mesh.triangle(bottom, next_bottom, next_top);
         mesh.triangle(bottom, next_top, top);
     }
+}
+
+void add_cylinder(MeshBuilder& mesh, Random& random, const dvec3& center, double spacing, uint32_t sides) {
+    const double length = std::min(random.uniform(3.0, 10.0) * spacing, 2.0);
+    const double radius = length * random.uniform(1.0 / 60.0, 1.0 / 25.0);
+    const dvec3 axis = random.direction();
+    add_tube(mesh, center - 0.5 * length * axis, center + 0.5 * length * axis, radius, sides);
 }
 
 Scene generate_cylinders(const GeneratorSpec& spec) {
@@ -360,6 +389,123 @@ Scene generate_cylinders(const GeneratorSpec& spec) {
         }
     }
     return std::move(mesh).into_scene(spec.text, {{0, 0.9, 2.8}, {0, 0, 0}, {0, 1, 0}, 50.0f});
+}
+
+// ---- gen:foliage: a tree seen from outside, as a scanned plant is: a trunk and branches (thin tubes of 6 sides)
+// carrying clusters of thin leaves, each a diamond of two triangles at a random orientation about a point of its
+// branch's outer part. The leaves are slivers whose boxes are mostly empty at every orientation, packed densely in
+// the crown: splits pay there, yet a leaf's box is small against the scene's.
+
+constexpr uint32_t kBranchSides = 6;
+constexpr uint64_t kTrianglesPerBranch = 400;  // of the budget: a branch, the rest its leaves
+constexpr uint64_t kBranchesPerObject = 8;     // leaves of this many consecutive branches form an object
+
+// A leaf of `length` centred at `center`: a diamond of two triangles, or its first half alone.
+void add_leaf(MeshBuilder& mesh, Random& random, const dvec3& center, double length, bool whole) {
+    const dvec3 along = random.direction();
+    const auto [u, w] = perpendiculars(along);
+    const double turn = random.uniform(0.0, 2.0 * pi), width = length * random.uniform(0.15, 0.3);
+    const dvec3 across = 0.5 * width * (std::cos(turn) * u + std::sin(turn) * w);
+    const uint32_t base = mesh.vertex(center - 0.5 * length * along), tip = mesh.vertex(center + 0.5 * length * along);
+    mesh.triangle(base, mesh.vertex(center + across), tip);
+    if (whole) mesh.triangle(base, tip, mesh.vertex(center - across));
+}
+
+Scene generate_foliage(const GeneratorSpec& spec) {
+    const uint64_t total = std::max<uint64_t>(spec.triangles, 2 * kBranchSides + 2);
+    const uint64_t branches = std::max<uint64_t>(total / kTrianglesPerBranch, 1);
+    const uint64_t leaf_triangles = total - 2 * kBranchSides * branches;
+    const uint64_t leaves = (leaf_triangles + 1) / 2;  // an odd count makes the last leaf one triangle
+    const double leaf_length = std::min(1.2 / std::cbrt(double(leaves)), 0.2);
+
+    Random random(spec.seed);
+    MeshBuilder mesh;
+    mesh.begin_object("branches");
+    std::vector<std::pair<dvec3, dvec3>> limbs{{dvec3(0, -1, 0), dvec3(0, 0, 0)}};  // the trunk first
+    add_tube(mesh, limbs[0].first, limbs[0].second, 0.04, kBranchSides);
+    while (limbs.size() < branches) {
+        const dvec3 base(0.0, random.uniform(-0.6, 0.0), 0.0);
+        dvec3 direction = random.direction();
+        direction.y = 0.2 + 0.8 * std::abs(direction.y);  // upwards and outwards
+        const dvec3 tip = base + random.uniform(0.4, 0.9) * glm::normalize(direction);
+        add_tube(mesh, base, tip, random.uniform(0.008, 0.015), kBranchSides);
+        limbs.emplace_back(base, tip);
+    }
+    const EvenSelection per_branch{leaves, branches};
+    uint64_t leaf = 0;
+    for (uint64_t b = 0; b < branches; ++b) {
+        if (b % kBranchesPerObject == 0) mesh.begin_object("leaves_" + std::to_string(b / kBranchesPerObject));
+        const auto& [base, tip] = limbs[b];
+        for (uint64_t k = 0; k < per_branch.share(b); ++k, ++leaf) {
+            const dvec3 center = base + random.uniform(0.3, 1.0) * (tip - base) + random.uniform(0.0, 0.15) * random.direction();
+            add_leaf(mesh, random, center, leaf_length * random.uniform(0.7, 1.3), leaf + 1 < leaves || leaf_triangles % 2 == 0);
+        }
+    }
+    const Camera camera = mesh.camera_at({0.0, 0.2, 1.1});
+    return std::move(mesh).into_scene(spec.text, camera);
+}
+
+// ---- gen:city: a grid of blocks between streets, each block holding axis-aligned buildings of widely varied
+// footprints and heights (both log-uniform: sheds to towers 25 times as tall), seen from street level at the
+// city's edge, down the middle street. Thin street markings just above the ground take the budget's remainder.
+
+constexpr uint64_t kBuildingTriangles = 10;  // a box open at the ground
+constexpr uint64_t kBuildingsPerBlock = 16;
+
+// The box [lower, upper] without its bottom face: 8 corners, 10 triangles facing outwards.
+void add_building(MeshBuilder& mesh, const dvec3& lower, const dvec3& upper) {
+    const uint32_t base = mesh.vertex_count();
+    for (int k = 0; k < 8; ++k)  // corner k: x from bit 0, y from bit 1, z from bit 2
+        mesh.vertex({k & 1 ? upper.x : lower.x, k & 2 ? upper.y : lower.y, k & 4 ? upper.z : lower.z});
+    const uint32_t faces[5][4] = {{2, 6, 7, 3}, {0, 2, 3, 1}, {4, 5, 7, 6}, {0, 4, 6, 2}, {1, 3, 7, 5}};  // top, -z, +z, -x, +x
+    for (const auto& f : faces) {
+        mesh.triangle(base + f[0], base + f[1], base + f[2]);
+        mesh.triangle(base + f[0], base + f[2], base + f[3]);
+    }
+}
+
+// A street marking: a thin strip along a street's centre line, just above the ground, or its first half alone.
+void add_marking(MeshBuilder& mesh, Random& random, uint32_t blocks_across, double pitch, bool whole) {
+    const double line = -1.0 + pitch * random.integer(0, int(blocks_across)), along = random.uniform(-1.0, 1.0);
+    const double half_length = 0.15 * pitch, half_width = 0.01 * pitch, y = 0.001;
+    const bool x_street = random.integer(0, 1) == 1;  // runs along z at x = line, else along x at z = line
+    const auto at = [&](double a, double b) { return x_street ? dvec3(line + b, y, along + a) : dvec3(along + a, y, line + b); };
+    const uint32_t first = mesh.vertex(at(-half_length, -half_width));
+    mesh.vertex(at(-half_length, half_width));
+    mesh.vertex(at(half_length, half_width));
+    mesh.triangle(first, first + 1, first + 2);
+    if (whole) mesh.triangle(first, first + 2, mesh.vertex(at(half_length, -half_width)));
+}
+
+Scene generate_city(const GeneratorSpec& spec) {
+    const uint64_t total = std::max<uint64_t>(spec.triangles, 2 + kBuildingTriangles);
+    const uint64_t buildings = std::max<uint64_t>((total - 2) * 95 / 100 / kBuildingTriangles, 1);
+    const uint64_t marking_triangles = total - 2 - kBuildingTriangles * buildings;
+    // An even number of blocks across, so that a street runs down the middle to the camera.
+    const auto blocks_across = uint32_t(std::max<long>(2 * std::lround(0.5 * std::sqrt(double(buildings) / kBuildingsPerBlock)), 2));
+    const double pitch = 2.0 / blocks_across, street = 0.2 * pitch, lot = pitch - street;
+
+    Random random(spec.seed);
+    MeshBuilder mesh;
+    const double edge = 1.0 + street;
+    add_polygon(mesh, "ground", {{-edge, 0, -edge}, {-edge, 0, edge}, {edge, 0, edge}, {edge, 0, -edge}});
+    const uint64_t blocks = uint64_t(blocks_across) * blocks_across;
+    const EvenSelection per_block{buildings, blocks};
+    for (uint64_t block = 0; block < blocks; ++block) {
+        mesh.begin_object("block_" + std::to_string(block));
+        const dvec3 corner(-1.0 + pitch * double(block % blocks_across) + 0.5 * street, 0.0,
+                           -1.0 + pitch * double(block / blocks_across) + 0.5 * street);
+        for (uint64_t k = 0; k < per_block.share(block); ++k) {
+            const double width = random.log_uniform(0.06, 0.45) * lot, depth = random.log_uniform(0.06, 0.45) * lot;
+            const dvec3 lower = corner + dvec3(random.uniform(0.0, lot - width), 0.0, random.uniform(0.0, lot - depth));
+            add_building(mesh, lower, lower + dvec3(width, random.log_uniform(0.02, 0.5), depth));
+        }
+    }
+    if (marking_triangles) mesh.begin_object("markings");
+    for (uint64_t t = 0; t < marking_triangles; t += 2)
+        add_marking(mesh, random, blocks_across, pitch, t + 1 < marking_triangles);
+    const Camera street_level{{0.0f, 0.015f, float(1.0 + 0.5 * street)}, mesh.bounds().center(), {0, 1, 0}, 60.0f};
+    return std::move(mesh).into_scene(spec.text, street_level);
 }
 
 // ---- gen:mirror: a headlamp-like faceted parabolic reflector, tessellated as a CAD tessellator does it at a

@@ -12,7 +12,7 @@ using Catch::Matchers::Contains;
 
 namespace {
 
-const char* const generators[] = {"box", "cylinders", "mirror", "surface", "triangles"};
+const char* const generators[] = {"box", "city", "cylinders", "foliage", "mirror", "surface", "triangles"};
 
 std::string spec(const std::string& generator, uint64_t tris, uint64_t seed) {
     return "gen:" + generator + "?tris=" + std::to_string(tris) + "&seed=" + std::to_string(seed);
@@ -51,6 +51,8 @@ TEST_CASE("generators produce exactly N triangles where the shape allows", "[sce
         CHECK(triangle_count(spec("box", n, 1)) == n);
         CHECK(triangle_count(spec("mirror", n, 1)) == n);
         CHECK(triangle_count(spec("triangles", n, 1)) == n);
+        CHECK(triangle_count(spec("foliage", n, 1)) == n);
+        CHECK(triangle_count(spec("city", n, 1)) == n);
         // Open cylinders and closed surfaces have an even count: an odd N gives N + 1.
         CHECK(triangle_count(spec("cylinders", n, 1)) == n + n % 2);
         CHECK(triangle_count(spec("surface", n, 1)) == n + n % 2);
@@ -61,6 +63,13 @@ TEST_CASE("generators produce exactly N triangles where the shape allows", "[sce
     CHECK(triangle_count("gen:mirror?tris=1") == 144);
     CHECK(triangle_count("gen:surface?tris=1") == 18);
     CHECK(triangle_count("gen:triangles?tris=1") == 1);
+    CHECK(triangle_count("gen:foliage?tris=1") == 14);  // the trunk and one leaf
+    CHECK(triangle_count("gen:city?tris=1") == 12);     // the ground and one building
+    for (uint64_t n : {13u, 14u, 15u, 799u, 800u, 801u}) {
+        INFO("tris=" << n);
+        CHECK(triangle_count(spec("foliage", n, 2)) == std::max<uint64_t>(n, 14));
+        CHECK(triangle_count(spec("city", n, 2)) == n);
+    }
     CHECK(triangle_count("gen:box") == 100000);  // the default tris
 }
 
@@ -192,4 +201,43 @@ TEST_CASE("bad generator specs name the spec and the key", "[scenes][generators]
         INFO(c.spec);
         CHECK_THAT(input_error_of([&] { load_scene(c.spec); }), Contains(c.spec) && Contains(c.detail));
     }
+}
+
+TEST_CASE("gen:foliage is thin leaves at every orientation around a trunk and branches", "[scenes][generators]") {
+    const Scene scene = generate_scene("gen:foliage?tris=48000&seed=4");
+    const std::vector<Object>& objects = scene.meshes[0].objects;
+    REQUIRE(objects.size() > 2);
+    CHECK(objects[0].name == "branches");
+    CHECK(objects[0].triangle_count == 120 * 12);  // a branch a 400 triangles, 12 each
+    for (size_t i = 1; i < objects.size(); ++i) CHECK(objects[i].name == "leaves_" + std::to_string(i - 1));
+    // Slivers: a leaf's box is mostly empty (cylinders' are about 95, compact surfaces' under 10).
+    CHECK(median_box_to_area_ratio(scene) > 15.0);
+    // Leaves face every way: normals spread over all three axes.
+    Vec3 mean_abs_normal(0.0f);
+    const FlatScene flat = flatten(scene);
+    for (const Triangle& t : flat.triangles) mean_abs_normal += glm::abs(glm::normalize(glm::cross(t.v1 - t.v0, t.v2 - t.v0)));
+    mean_abs_normal /= float(flat.triangles.size());
+    for (int a = 0; a < 3; ++a) CHECK((mean_abs_normal[a] > 0.35f && mean_abs_normal[a] < 0.65f));
+}
+
+TEST_CASE("gen:city is axis-aligned buildings of widely varied sizes, seen from street level", "[scenes][generators]") {
+    const Scene scene = generate_scene("gen:city?tris=20001&seed=5");
+    const std::vector<Object>& objects = scene.meshes[0].objects;
+    REQUIRE(objects.size() > 3);
+    CHECK(objects.front().name == "ground");
+    CHECK(objects.back().name == "markings");
+    CHECK((objects.back().triangle_count > 0 && objects.back().triangle_count < 20001 / 16));  // the remainder
+    const FlatScene flat = flatten(scene);
+    float lowest_top = 1.0f, highest_top = 0.0f;
+    for (const Triangle& t : flat.triangles) {
+        const Vec3 n = glm::cross(t.v1 - t.v0, t.v2 - t.v0);
+        REQUIRE(int(n.x == 0.0f) + int(n.y == 0.0f) + int(n.z == 0.0f) == 2);  // every face axis-aligned
+        const bool roof = n.x == 0.0f && n.z == 0.0f && t.v0.y > 0.01f;  // not the ground or a marking
+        if (roof) lowest_top = std::min(lowest_top, t.v0.y), highest_top = std::max(highest_top, t.v0.y);
+    }
+    CHECK(highest_top > 10.0f * lowest_top);
+    // The eye stands in a street, below every roof.
+    const Camera& camera = *scene.camera;
+    CHECK(camera.eye.y < lowest_top);
+    CHECK(std::abs(camera.eye.x) < 0.01f);
 }
