@@ -27,8 +27,8 @@ bool enter_object(const WideBvh<N>& pool, const TopLevelRef& entry, const SlabRa
 }
 
 // The top-level leaf `leaf`, a run of instance entries: each entered with the ray in its instance's space. Out
-// of line, so the world-ray loop, all that scenes of identity placements run, stays small (crytek-sponza frames
-// about 2% faster; within noise on zoo-64). world_tri() gives the world ray's triangle test.
+// of line, so the instanced loop stays small (crytek-sponza frames about 2% faster when it still ran this loop;
+// within noise on zoo-64). world_tri() gives the world ray's triangle test.
 template <Query Q, bool Robust, class TriangleTest, int N, class Counter, class WorldTri>
 [[gnu::noinline]] bool enter_instances(const TwoLevelBvh<N>& bvh, const StackEntry& leaf, const Ray& ray, float tmin,
                                        const SlabRay<N>& world_box, WorldTri&& world_tri, Hit& hit, Counter& counter) {
@@ -77,8 +77,8 @@ template <Query Q, bool Robust, class TriangleTest, int N, class Counter>
 
 // A structure without instance entries (every BRef of a direct() placement, as in a scene of one file's objects)
 // is walked by the flat kernel's own loop from the top level's root: the instanced loop, whose call to
-// enter_instances is never taken there, traced crytek-sponza's re-braided frames in 0.99x the flat tree's time
-// (two runs), this one in 0.94x and 0.96x.
+// enter_instances is never taken there, traced crytek-sponza's re-braided frames in 1.024x and 1.021x the flat
+// tree's time, this one in 0.923x and 0.947x (alternating binaries, two runs each).
 template <Query Q, bool Robust, class TriangleTest, int N, class Counter>
 [[gnu::noinline]] void traverse_direct(const TwoLevelBvh<N>& bvh, const Ray& ray, Hit& hit, Counter& counter) {
     traverse_tree<Q, Robust, TriangleTest, N>(bvh.pool, bvh.root, bvh.bounds, bvh.pool.frame, ray, hit, counter);
