@@ -69,8 +69,9 @@ const ReferenceCap kReferenceCaps[] = {
     {kKdTreeName, KdSettings{}.max_references_per_triangle},
 };
 
-// The builders `--builder auto` chooses from (renderer/auto_builder.cpp): its estimate is the largest of theirs.
-constexpr const char* kAutoCandidates[] = {"binned", "bonsai-split", "esc", "bittner", "lbvh"};
+// The builders `--builder auto` chooses from (renderer/auto_builder.cpp): its estimate is the largest of theirs, plus
+// the largest layout again, as its calibration keeps the best tree so far while it builds the next.
+constexpr const char* kAutoCandidates[] = {"binned", "bonsai-split", "esc", "sbvh", "sweep", "bittner", "lbvh"};
 
 MemoryEstimate build_terms(const SceneSize& size, const BuildPlan& plan) {
     MemoryEstimate e;
@@ -94,10 +95,13 @@ MemoryEstimate build_terms(const SceneSize& size, const BuildPlan& plan) {
 MemoryEstimate plan_terms(const SceneSize& size, const BuildPlan& plan) {
     if (plan.builder != "auto") return build_terms(size, plan);
     MemoryEstimate largest = build_terms(size, {"binned", plan.width, true});
+    uint64_t kept = largest.layout;
     for (const char* candidate : kAutoCandidates) {
         const MemoryEstimate e = build_terms(size, {candidate, plan.width, false});
         if (e.total() > largest.total()) largest = e;
+        kept = std::max(kept, e.layout);
     }
+    largest.layout += kept;
     return largest;
 }
 

@@ -4,6 +4,7 @@
 // template over its own tracer type, so no per-ray dispatch is paid.
 #include "accel/two_level.h"
 #include "kernels/traverse.h"
+#include "renderer/auto_builder.h"
 #include "renderer/path_tracer.h"
 
 #include <memory>
@@ -42,6 +43,8 @@ public:
     // `--builder auto`: what it chose (builder, with "two-level/" in front when it chose that) and why.
     virtual std::string chosen() const { return ""; }
     virtual std::string reason() const { return ""; }
+    // `--builder auto`: the last build's calibration (every candidate's predicted or measured costs); null otherwise.
+    virtual const AutoChoice* auto_choice() const { return nullptr; }
     virtual int frames_planned() const { return 0; }
 
     // Untimed preparation for one build (canopy: PrimRef generation), then the timed build.
@@ -81,9 +84,10 @@ struct CanopyOptions {
     // flat: one BVH over world triangles; two-level: object BVHs (built by `builder`) under a top level over
     // instances; rebraid: that top level opening object BVHs where they overlap (Benthin et al. 2017).
     std::string toplevel = "flat";
-    // builder "auto" plans for this many frames of this many pixels (time to image = build + frames x frame).
+    // builder "auto" plans for this many frames (time to image = build + frames x frame) of this frame, whose
+    // sample pixels its calibration traces (single-ray tracer) with the scene's camera.
     int frames_planned = 16;
-    uint64_t pixels = 1024 * 768;
+    FrameSettings planned_frame;
     CollapseMethod collapse = CollapseMethod::Optimal;  // of the binary tree into the wide layout (bvh4, bvh8)
     // Flat trees: the layout's nodes shuffled in memory with this seed after the build (permute_nodes, untimed
     // study experiment); the tree and every answer stay the same.

@@ -5,7 +5,10 @@
 
 #include <algorithm>
 #include <cstdio>
+#include <cmath>
 #include <limits>
+#include <optional>
+#include <stdexcept>
 
 namespace canopy {
 
@@ -47,14 +50,14 @@ SceneStatistics scene_statistics(const Scene& scene, const FlatScene& flat) {
 
 namespace {
 
-// A candidate's cost model, from one `canopy bench` per scene on the project machine, 2 threads, bvh8 (README,
+// A candidate's prior, from one `canopy bench` per scene on the project machines, 2 threads, bvh8 (README,
 // "Choosing a builder"): build time per triangle built, and frame time relative to binned SAH's as a function of
-// the scene's statistics.
-struct Candidate {
+// the scene's statistics. Only the order of the calibration and the candidates it does not measure depend on it.
+struct Prior {
     const char* builder;
     const char* toplevel;
     double build_ns_per_triangle;         // on scenes without slivers
-    double sliver_build_ns_per_triangle;  // where splitting builders split (gen:cylinders)
+    double sliver_build_ns_per_triangle;  // where splitting builders split (gen:cylinders, gen:foliage)
     double (*relative_frame)(const SceneStatistics&);
 };
 
@@ -69,8 +72,7 @@ constexpr double kScanExcess = 1.75;
 bool architecture(const SceneStatistics& s) { return s.box_excess < kScanExcess; }
 // Architecture whose triangle boxes a ray pierces far more often than their triangles: crytek-sponza 6.8 (big
 // overlapping wall and arch triangles); sibenik 3.6, conference 3.7, gen:box 0.6, cornell-box 0.4, scans 1.7 to
-// 2.9. Splitting pays there even without slivers. The threshold lies between the shared scenes that split well and
-// those that do not; crytek-sponza is the only non-sliver scene measured above it.
+// 2.9. Splitting pays there even without slivers.
 constexpr double kSplitCover = 5.0;
 bool dense_boxes(const SceneStatistics& s) { return architecture(s) && s.reducible_cover > kSplitCover; }
 
@@ -80,64 +82,166 @@ double same_as_binned(const SceneStatistics&) { return 1.0; }
 double bonsai_split_frame(const SceneStatistics& s) {
     return slivers(s) ? 0.38 : dense_boxes(s) ? 0.84 : architecture(s) ? 1.0 : 1.03;
 }
-// The same tree as binned without slivers (no triangle is split); cylinders 0.37.
+// The same tree as binned where its automatic SA_max does not split; cylinders 0.37.
 double esc_frame(const SceneStatistics& s) { return slivers(s) ? 0.37 : 1.0; }
+// crytek-sponza 0.91, gen:surface 0.97, gen:foliage 0.59 (one run each, 2026-12-04).
+double sbvh_frame(const SceneStatistics& s) { return slivers(s) ? 0.45 : dense_boxes(s) ? 0.91 : architecture(s) ? 0.95 : 0.97; }
+// Full sweeps instead of bins: crytek-sponza 0.99, gen:surface 0.97, gen:foliage 1.10.
+double sweep_frame(const SceneStatistics&) { return 1.0; }
 // crytek-sponza 0.75, sibenik 0.96, conference 0.92, gen:box 0.91; scans 1.01 to 1.04; not measured on
 // slivers, where it cannot split.
 double bittner_frame(const SceneStatistics& s) { return dense_boxes(s) ? 0.75 : architecture(s) ? 0.9 : 1.04; }
 // One-triangle leaves, merged into blocks in the wide layout: architecture 1.18 to 1.38, scans 1.10 to 1.21,
 // cylinders 1.86. The cheapest build, so it wins where a frame is cheap against building.
 double lbvh_frame(const SceneStatistics& s) { return slivers(s) ? 1.86 : architecture(s) ? 1.25 : 1.15; }
-
 // zoo-64, traversal against flat's: rebraid 1.035. Plain two-level (1.07) builds in the same time and traces
 // slower, so it is no candidate.
 double rebraid_frame(const SceneStatistics&) { return 1.035; }
 
-constexpr Candidate kCandidates[] = {
+constexpr Prior kPriors[] = {
     {"binned", "flat", 190.0, 240.0, &same_as_binned},
-    {"bonsai-split", "flat", 280.0, 1130.0, &bonsai_split_frame},
-    {"esc", "flat", 190.0, 1040.0, &esc_frame},
-    {"bittner", "flat", 4000.0, 4000.0, &bittner_frame},
+    {"bonsai-split", "flat", 280.0, 750.0, &bonsai_split_frame},
+    {"esc", "flat", 190.0, 850.0, &esc_frame},
+    {"sbvh", "flat", 1200.0, 1600.0, &sbvh_frame},
+    {"sweep", "flat", 400.0, 400.0, &sweep_frame},
+    {"bittner", "flat", 4000.0, 7500.0, &bittner_frame},
     {"lbvh", "flat", 90.0, 100.0, &lbvh_frame},
     // Instanced objects: each unique triangle is built once (zoo-64: 25 ms against flat binned's 820 ms).
     {"binned", "rebraid", 600.0, 600.0, &rebraid_frame},
 };
 // Frame time per pixel with binned, 2 threads, bvh8: rooms seen from inside 1.4 to 2.6 us (crytek-sponza, sibenik,
 // conference), objects seen from outside 0.07 to 0.6 us (geometric mean 0.2: the scans, cornell-box, gen:box,
-// gen:surface, zoo-64), the sliver field 6.3 us.
+// gen:surface, zoo-64), the sliver field 6.3 us. The calibration replaces these by what it measures.
 constexpr double kInsideNsPerPixel = 2000.0, kOutsideNsPerPixel = 200.0, kSliverNsPerPixel = 6300.0;
 double frame_ns_per_pixel(const SceneStatistics& s) {
     return slivers(s) ? kSliverNsPerPixel : s.camera_inside ? kInsideNsPerPixel : kOutsideNsPerPixel;
 }
+// Flattening copies every instance: past this many triangles (about 2 GB of flat layout) two-level only.
 constexpr uint64_t kMaxFlattenedTriangles = 16'000'000;
+
+bool allowed(const Prior& p, const SceneStatistics& stats) {
+    const bool instanced = stats.triangles > stats.unique_triangles;
+    const bool two_level = std::string(p.toplevel) != "flat";
+    if (two_level) return instanced;  // two-level only with instances
+    return !instanced || stats.triangles <= kMaxFlattenedTriangles;
+}
+
+double geometric_mean(const std::vector<double>& ratios) {
+    double log_sum = 0.0;
+    for (double r : ratios) log_sum += std::log(r);
+    return std::exp(log_sum / double(ratios.size()));
+}
+
+// The measured candidates' costs against their priors, as factors for the others': how much faster or slower
+// this machine and scene are than the priors assumed.
+std::pair<double, double> measured_scales(const std::vector<CandidateEstimate>& now, const std::vector<CandidateEstimate>& prior) {
+    std::vector<double> build, frame;
+    for (size_t i = 0; i < now.size(); ++i) {
+        if (!now[i].measured) continue;
+        if (now[i].build_ms > 0.0 && prior[i].build_ms > 0.0) build.push_back(now[i].build_ms / prior[i].build_ms);
+        if (now[i].frame_ms > 0.0 && prior[i].frame_ms > 0.0) frame.push_back(now[i].frame_ms / prior[i].frame_ms);
+    }
+    return {build.empty() ? 1.0 : geometric_mean(build), frame.empty() ? 1.0 : geometric_mean(frame)};
+}
+
+std::string label(const CandidateEstimate& c) { return c.toplevel == "flat" ? c.builder : c.toplevel + "/" + c.builder; }
 
 }  // namespace
 
-AutoChoice choose_builder(const SceneStatistics& stats, int frames, uint64_t pixels) {
-    const bool instanced = stats.triangles > stats.unique_triangles;
-    AutoChoice best;
-    double best_ms = std::numeric_limits<double>::infinity(), frame_ms = 0.0, build_ms = 0.0;
-    for (const Candidate& c : kCandidates) {
-        const bool two_level = std::string(c.toplevel) != "flat";
-        if (two_level && !instanced) continue;  // two-level only with instances
-        // Flattening copies every instance: past this many triangles (about 2 GB of flat layout) two-level only.
-        if (!two_level && instanced && stats.triangles > kMaxFlattenedTriangles) continue;
+std::vector<CandidateEstimate> prior_estimates(const SceneStatistics& stats, int frames, uint64_t pixels) {
+    std::vector<CandidateEstimate> out;
+    for (const Prior& p : kPriors) {
+        if (!allowed(p, stats)) continue;
+        const bool two_level = std::string(p.toplevel) != "flat";
         const double built = double(two_level ? stats.unique_triangles : stats.triangles);
-        const double build = built * (slivers(stats) ? c.sliver_build_ns_per_triangle : c.build_ns_per_triangle) * 1e-6;
-        const double frame = double(pixels) * frame_ns_per_pixel(stats) * 1e-6 * c.relative_frame(stats);
-        const double total = build + double(frames) * frame;
-        if (total < best_ms) best_ms = total, best = {c.builder, c.toplevel, ""}, frame_ms = frame, build_ms = build;
+        CandidateEstimate c{p.builder, p.toplevel};
+        c.build_ms = built * (slivers(stats) ? p.sliver_build_ns_per_triangle : p.build_ns_per_triangle) * 1e-6;
+        c.frame_ms = double(pixels) * frame_ns_per_pixel(stats) * 1e-6 * p.relative_frame(stats);
+        out.push_back(c);
     }
-    char reason[320];
+    std::stable_sort(out.begin(), out.end(), [&](const CandidateEstimate& a, const CandidateEstimate& b) {
+        return a.time_to_image_ms(frames) < b.time_to_image_ms(frames);
+    });
+    return out;
+}
+
+AutoChoice choose_builder(const SceneStatistics& stats, int frames, uint64_t pixels, Calibration& calibration) {
+    const std::vector<CandidateEstimate> prior = prior_estimates(stats, frames, pixels);
+    std::vector<CandidateEstimate> now = prior;
+    std::vector<bool> decided(now.size(), false);
+    AutoChoice choice;
+    std::optional<size_t> best;
+    double spent = 0.0;  // every build and sample so far
+    for (;;) {
+        const auto [build_scale, frame_scale] = measured_scales(now, prior);
+        std::optional<size_t> next;
+        for (size_t i = 0; i < now.size(); ++i) {
+            if (decided[i]) continue;
+            now[i].build_ms = prior[i].build_ms * build_scale, now[i].frame_ms = prior[i].frame_ms * frame_scale;
+            if (!next || now[i].time_to_image_ms(frames) < now[*next].time_to_image_ms(frames)) next = i;
+        }
+        if (!next) break;
+        CandidateEstimate& c = now[*next];
+        decided[*next] = true;
+        const double best_ms = best ? now[*best].time_to_image_ms(frames) : 0.0;
+        const double budget = kCalibrationBudget * best_ms, waste = spent - (best ? now[*best].build_ms : 0.0);
+        const double cost = c.build_ms + c.frame_ms * calibration.sampled_share();
+        if (!best) c.note = "the predicted best: measured first";
+        else if (c.time_to_image_ms(frames) < best_ms) c.note = "predicted to beat the best measured";
+        else if (waste + cost <= budget) c.note = "within the calibration budget";
+        else {
+            c.note = "not measured: cannot win as predicted, and over the budget";
+            choice.candidates.push_back(c);
+            continue;
+        }
+        c.build_ms = calibration.build(c.builder, c.toplevel);
+        std::tie(c.sample_ms, c.frame_ms) = calibration.sample_frame();
+        c.measured = true;
+        spent += c.build_ms + c.sample_ms;
+        if (!best || c.time_to_image_ms(frames) < best_ms) {
+            if (best) calibration.discard(now[*best].builder, now[*best].toplevel);
+            best = *next;
+        } else {
+            calibration.discard(c.builder, c.toplevel);
+        }
+        choice.candidates.push_back(c);
+    }
+    if (!best) throw std::logic_error("auto: no candidate for this scene");
+    const CandidateEstimate& winner = now[*best];
+    choice.builder = winner.builder, choice.toplevel = winner.toplevel;
+    choice.calibration_ms = spent - winner.build_ms;
+    choice.budget_ms = kCalibrationBudget * winner.time_to_image_ms(frames);
+    const size_t measured = size_t(std::count_if(now.begin(), now.end(), [](const CandidateEstimate& c) { return c.measured; }));
+    char reason[400];
     std::snprintf(reason, sizeof reason,
-                  "%llu triangles (%llu unique) in %llu placed objects, box excess %.2f, reducible cover %.1f, camera %s, "
-                  "%d frames planned: predicted build %.1f ms + %d x %.1f ms",
+                  "%llu triangles (%llu unique) in %llu placed objects, box excess %.2f, reducible cover %.1f, camera %s; "
+                  "%zu of %zu candidates measured (calibration %.1f ms); %d frames planned: %s, build %.1f ms + %d x %.1f ms",
                   (unsigned long long)stats.triangles, (unsigned long long)stats.unique_triangles,
                   (unsigned long long)stats.placements, stats.box_excess, stats.reducible_cover,
-                  stats.camera_inside ? "inside" : "outside",
-                  frames, build_ms, frames, frame_ms);
-    best.reason = reason;
-    return best;
+                  stats.camera_inside ? "inside" : "outside", measured, now.size(), choice.calibration_ms, frames,
+                  label(winner).c_str(), winner.build_ms, frames, winner.frame_ms);
+    choice.reason = reason;
+    return choice;
+}
+
+std::string explain(const AutoChoice& choice, int frames) {
+    std::string out;
+    char line[320];
+    std::snprintf(line, sizeof line, "  %-22s %10s %10s %14s  %s\n", "candidate", "build ms", "frame ms",
+                  ("TTI@" + std::to_string(frames) + " ms").c_str(), "");
+    out += line;
+    for (const CandidateEstimate& c : choice.candidates) {
+        std::snprintf(line, sizeof line, "  %-22s %10.2f %10.2f %14.1f  %s%s\n", label(c).c_str(), c.build_ms, c.frame_ms,
+                      c.time_to_image_ms(frames), c.measured ? "measured; " : "predicted; ", c.note.c_str());
+        out += line;
+    }
+    std::snprintf(line, sizeof line,
+                  "  chosen: %s%s, the least time to image; calibration %.1f ms (builds of the others and the samples), "
+                  "budget %.1f ms (%.0f%% of the best)\n",
+                  choice.toplevel == "flat" ? "" : (choice.toplevel + "/").c_str(), choice.builder.c_str(),
+                  choice.calibration_ms, choice.budget_ms, 100.0 * kCalibrationBudget);
+    out += line;
+    return out;
 }
 
 }  // namespace canopy

@@ -1,7 +1,9 @@
 #pragma once
-// `--builder auto`: "model only what a scene requires". From statistics that cost one pass over the triangles,
-// predict each candidate's time to image (build + frames x frame time) and take the smallest: splitting builders
-// only where triangle boxes are much larger than the triangles, a two-level hierarchy only with instances.
+// `--builder auto`: "model only what a scene requires", measured rather than assumed. Cheap statistics (one pass
+// over the triangles) order the candidates by a prior prediction of their time to image (build + frames x frame
+// time); then auto builds candidates on the machine at hand and traces a small sample of the planned frame's
+// pixels through each, re-predicting the untried ones from what it measured, while the calibration's waste stays
+// within a share of the best time to image found. The winner's tree is the one built during the calibration.
 #include "scenes/scene.h"
 
 #include <string>
@@ -27,13 +29,53 @@ struct SceneStatistics {
 
 SceneStatistics scene_statistics(const Scene& scene, const FlatScene& flat);
 
+// What auto measures on the machine at hand. The accelerator builds real trees and traces real sample pixels;
+// tests answer with fixed costs, so that decisions are pinned through predicted and "measured" costs, not timings.
+class Calibration {
+public:
+    virtual ~Calibration() = default;
+    // Builds the candidate (keeping it until the next build of another); returns the build's milliseconds.
+    virtual double build(const std::string& builder, const std::string& toplevel) = 0;
+    // Traces the sample pixels of the planned frame through the last build. Returns {the sample's milliseconds,
+    // the whole frame's milliseconds predicted from it}.
+    virtual std::pair<double, double> sample_frame() = 0;
+    // The candidate's tree is no longer wanted (it lost to another): its memory may go.
+    virtual void discard(const std::string& builder, const std::string& toplevel) = 0;
+    // The share of the frame's pixels a sample traces.
+    virtual double sampled_share() const = 0;
+};
+
+struct CandidateEstimate {
+    std::string builder, toplevel;
+    double build_ms = 0.0, frame_ms = 0.0;  // measured when `measured`, predicted otherwise
+    double sample_ms = 0.0;                 // the sample's cost, when measured
+    bool measured = false;
+    std::string note;  // why it was or was not tried
+    double time_to_image_ms(int frames) const { return build_ms + double(frames) * frame_ms; }
+};
+
 struct AutoChoice {
     std::string builder;            // a registered builder
     std::string toplevel = "flat";  // flat, or rebraid for instanced scenes
-    std::string reason;             // one line: the statistics and predicted times that decided
+    std::string reason;             // one line: the statistics, the calibration and the winner's times
+    std::vector<CandidateEstimate> candidates;  // in the order auto tried or ruled them out
+    double calibration_ms = 0.0;    // builds of the losers and every sample: what measuring cost on top of the winner
+    double budget_ms = 0.0;         // what the calibration was allowed to waste
 };
 
-// Picks the candidate with the least predicted time to image for `frames` frames of `pixels` pixels.
-AutoChoice choose_builder(const SceneStatistics& stats, int frames, uint64_t pixels);
+// The candidates, build and frame costs predicted from the statistics alone (the order the calibration tries
+// them in) for `frames` frames of `pixels` pixels. Public for tests and --explain.
+std::vector<CandidateEstimate> prior_estimates(const SceneStatistics& stats, int frames, uint64_t pixels);
+
+// The calibration may waste (build losers, trace samples) this share of the best time to image it has measured.
+constexpr double kCalibrationBudget = 0.05;
+
+// Chooses the candidate with the least time to image for `frames` frames of `pixels` pixels: tries the predicted
+// best first, then every candidate predicted to beat the best measured, or cheap enough to measure within the
+// budget; predicts the untried ones by scaling their priors by what the measured ones took against theirs.
+AutoChoice choose_builder(const SceneStatistics& stats, int frames, uint64_t pixels, Calibration& calibration);
+
+// --explain: one line per candidate (predicted or measured build and frame, time to image, note), then the winner.
+std::string explain(const AutoChoice& choice, int frames);
 
 }  // namespace canopy

@@ -11,7 +11,10 @@
 
 #include <tbb/enumerable_thread_specific.h>
 
+#include <algorithm>
+#include <chrono>
 #include <cstdio>
+#include <map>
 #include <variant>
 
 namespace canopy {
@@ -222,6 +225,14 @@ public:
         });
     }
 
+    // render_sample through this tree (single-ray tracer); returns {rays, pixels} traced.
+    std::pair<uint64_t, uint64_t> render_sample(const ShadingScene& scene, const PinholeCamera& camera, uint32_t stride) const {
+        return with_kernel([&]<int N, bool Robust, class Test>(const auto& bvh) {
+            using Layout = std::decay_t<decltype(bvh)>;
+            return canopy::render_sample(CanopyTracer<Layout, Robust, Test>{bvh}, scene, camera, 0, stride);
+        });
+    }
+
     Hit trace(const Ray& ray) const override {
         return with_kernel([&]<int N, bool Robust, class Test>(const auto& bvh) {
             Hit hit;
@@ -312,13 +323,23 @@ private:
     bool two_level_built_ = false;
 };
 
-// `--builder auto`: each build computes the scene statistics, chooses (renderer/auto_builder.h) and builds with
-// the chosen accelerator; all of it is timed, including the chosen builder's PrimRefs, which other rows prepare
-// untimed. The chosen accelerator is kept while the choice stays the same (it always does for one scene).
-class AutoAccelerator final : public Accelerator {
+// `--builder auto`: each build computes the scene statistics and runs the calibration (renderer/auto_builder.h),
+// which builds candidates and traces the planned frame's sample pixels through them; the winner's tree is the one
+// the calibration built. All of it is timed, including every candidate's PrimRefs, which other rows prepare untimed.
+class AutoAccelerator final : public Accelerator, private Calibration {
 public:
     AutoAccelerator(const Scene& scene, const FlatScene& flat, const CanopyOptions& options)
-        : scene_(scene), flat_(flat), options_(options) {}
+        : scene_(scene), flat_(flat), options_(options), sample_frame_(options.planned_frame) {
+        sample_frame_.tracer = TracerKind::Single;
+        stride_ = sample_stride(options.frames_planned);
+    }
+
+    // A sample's share of the frame grows with the frames planned, as its cost is paid once and its precision
+    // decides between candidates whose frames are all paid: one tile in 128 (0.8% of the frame) for one frame, in 32
+    // for 16 frames, in 8 (12.5%) from 256 frames.
+    static uint32_t sample_stride(int frames) {
+        return uint32_t(std::clamp(128.0 / std::sqrt(double(frames)), 8.0, 128.0));
+    }
 
     std::string library() const override { return "canopy"; }
     std::string builder() const override { return "auto"; }
@@ -326,22 +347,17 @@ public:
     std::string quality() const override { return ""; }
     std::string chosen() const override { return chosen_ ? chosen_->builder() : ""; }
     std::string reason() const override { return choice_.reason; }
+    const AutoChoice* auto_choice() const override { return chosen_ ? &choice_ : nullptr; }
     int frames_planned() const override { return options_.frames_planned; }
 
-    void prepare() override {
-        if (chosen_) chosen_->release();
-    }
+    void prepare() override { chosen_.reset(); }
 
     void build() override {
-        const AutoChoice choice = choose_builder(scene_statistics(scene_, flat_), options_.frames_planned, options_.pixels);
-        if (!chosen_ || choice.builder != choice_.builder || choice.toplevel != choice_.toplevel) {
-            CanopyOptions options = options_;
-            options.builder = choice.builder, options.toplevel = choice.toplevel, options.start.clear();
-            chosen_ = std::make_unique<CanopyAccelerator>(&scene_, flat_, options);
-        }
-        choice_ = choice;
-        chosen_->prepare();
-        chosen_->build();
+        warmed_up_ = false;
+        const uint64_t pixels = uint64_t(sample_frame_.width) * uint64_t(sample_frame_.height);
+        choice_ = choose_builder(scene_statistics(scene_, flat_), options_.frames_planned, pixels, *this);
+        chosen_ = std::move(trees_.at(key(choice_.builder, choice_.toplevel)));
+        trees_.clear();
     }
 
     void move(const PlacementMove& move) override {
@@ -365,6 +381,39 @@ public:
     AcceleratorReport report(bool with_epo) const override { return built().report(with_epo); }
 
 private:
+    static std::string key(const std::string& builder, const std::string& toplevel) { return toplevel + "/" + builder; }
+
+    double build(const std::string& builder, const std::string& toplevel) override {
+        CanopyOptions options = options_;
+        options.builder = builder, options.toplevel = toplevel, options.start.clear();
+        const auto start = std::chrono::steady_clock::now();
+        auto tree = std::make_unique<CanopyAccelerator>(&scene_, flat_, options);
+        tree->prepare();
+        tree->build();
+        const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+        last_ = tree.get();
+        trees_[key(builder, toplevel)] = std::move(tree);
+        return ms;
+    }
+
+    std::pair<double, double> sample_frame() override {
+        const ShadingScene shading{flat_, sample_frame_};
+        const PinholeCamera camera(scene_camera(scene_, flat_), sample_frame_.width, sample_frame_.height);
+        // Half a sample first, untimed, through the first tree: the first sample after waking the threads took 1.3x
+        // to 1.6x the next ones through the same tree (gen:foliage, esc).
+        const auto warm_up = std::chrono::steady_clock::now();
+        if (!warmed_up_) last_->render_sample(shading, camera, stride_ * 2), warmed_up_ = true;
+        const auto start = std::chrono::steady_clock::now();
+        const uint64_t traced = last_->render_sample(shading, camera, stride_).second;
+        const auto end = std::chrono::steady_clock::now();
+        const double ms = std::chrono::duration<double, std::milli>(end - start).count();
+        const double pixels = double(sample_frame_.width) * double(sample_frame_.height);
+        return {std::chrono::duration<double, std::milli>(end - warm_up).count(), traced ? ms * pixels / double(traced) : 0.0};
+    }
+
+    void discard(const std::string& builder, const std::string& toplevel) override { trees_.erase(key(builder, toplevel)); }
+    double sampled_share() const override { return 1.0 / double(stride_); }
+
     const Accelerator& built() const {
         if (!chosen_) throw std::logic_error("auto accelerator used before build()");
         return *chosen_;
@@ -373,7 +422,12 @@ private:
     const Scene& scene_;
     const FlatScene& flat_;
     CanopyOptions options_;
+    FrameSettings sample_frame_;  // the planned frame, traced one path at a time
+    uint32_t stride_ = 1;         // the sample traces one tile in stride_
+    bool warmed_up_ = false;      // this build's calibration has traced its untimed warm-up
     AutoChoice choice_;
+    std::map<std::string, std::unique_ptr<CanopyAccelerator>> trees_;  // the calibration's trees still wanted
+    const CanopyAccelerator* last_ = nullptr;
     std::unique_ptr<CanopyAccelerator> chosen_;
 };
 

@@ -8,7 +8,9 @@
 #include <OpenImageIO/imageio.h>
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <filesystem>
+#include <map>
 #include <fstream>
 
 using namespace canopy;
@@ -317,30 +319,160 @@ TEST_CASE("heatmaps hold what the counting kernel reports per pixel", "[render][
     CHECK_THROWS_WITH(write_heatmap(*embree, camera, 40, 30, path), Catch::Contains("canopy kernel"));
 }
 
-TEST_CASE("auto chooses two-level only with instances and plans for the frames asked", "[auto]") {
-    SceneStatistics flat_scene;
-    flat_scene.triangles = flat_scene.unique_triangles = 262205;
-    const AutoChoice few = choose_builder(flat_scene, 1, 64 * 48), many = choose_builder(flat_scene, 256, 1024 * 768);
-    CHECK(few.toplevel == "flat");
-    CHECK(many.toplevel == "flat");
-    CHECK(few.reason.find("1 frames planned") != std::string::npos);
-    // Splits for one frame only where triangle boxes are pierced far more often than triangles (crytek-sponza's
-    // statistics), not on architecture whose boxes are not (conference's).
-    SceneStatistics sponza = flat_scene, conference = flat_scene;
-    sponza.box_excess = 1.48, sponza.reducible_cover = 6.8, sponza.camera_inside = true;
-    conference.box_excess = 1.59, conference.reducible_cover = 3.7, conference.camera_inside = true;
-    CHECK(choose_builder(sponza, 1, 1024 * 768).builder == "bonsai-split");
-    CHECK(choose_builder(conference, 1, 1024 * 768).builder == "binned");
-    CHECK(choose_builder(sponza, 256, 1024 * 768).builder == "bittner");
-    CHECK(choose_builder(sponza, 1, 1024 * 768).reason.find("reducible cover 6.8") != std::string::npos);
-    // An object seen from outside, cheap to trace, a million triangles, one frame: the fastest build wins.
-    SceneStatistics surface;
-    surface.triangles = surface.unique_triangles = 1000000, surface.box_excess = 2.05, surface.reducible_cover = 2.5;
-    CHECK(choose_builder(surface, 1, 1024 * 768).builder == "lbvh");
-    CHECK(choose_builder(surface, 256, 1024 * 768).builder == "binned");
-    SceneStatistics zoo = flat_scene;
-    zoo.triangles = 64 * zoo.unique_triangles;
-    CHECK(choose_builder(zoo, 16, 1024 * 768).toplevel != "flat");
+namespace {
+
+// A machine and scene of known costs: what auto's calibration would measure, per candidate; what it built, traced
+// and discarded, in order.
+struct FixedCosts final : Calibration {
+    struct Costs { double build_ms, frame_ms; };
+    std::map<std::string, Costs> costs;  // by builder (flat) or "rebraid/binned"
+    std::vector<std::string> built, discarded;
+    double share = 0.01;
+    std::string last;
+
+    static std::string key(const std::string& builder, const std::string& toplevel) {
+        return toplevel == "flat" ? builder : toplevel + "/" + builder;
+    }
+    double build(const std::string& builder, const std::string& toplevel) override {
+        last = key(builder, toplevel);
+        built.push_back(last);
+        return costs.at(last).build_ms;
+    }
+    std::pair<double, double> sample_frame() override { return {costs.at(last).frame_ms * share, costs.at(last).frame_ms}; }
+    void discard(const std::string& builder, const std::string& toplevel) override { discarded.push_back(key(builder, toplevel)); }
+    double sampled_share() const override { return share; }
+};
+
+// Costs exactly as the priors predict them for these statistics.
+FixedCosts prior_costs(const SceneStatistics& stats, int frames, uint64_t pixels) {
+    FixedCosts fixed;
+    for (const CandidateEstimate& c : prior_estimates(stats, frames, pixels))
+        fixed.costs[FixedCosts::key(c.builder, c.toplevel)] = {c.build_ms, c.frame_ms};
+    return fixed;
+}
+
+SceneStatistics sponza_statistics() {
+    SceneStatistics s;
+    s.triangles = s.unique_triangles = 262205;
+    s.box_excess = 1.48, s.reducible_cover = 6.8, s.camera_inside = true;
+    return s;
+}
+
+constexpr uint64_t kPixels = 1024 * 768;
+
+}  // namespace
+
+TEST_CASE("auto measures the predicted best first and trusts what it measured over its priors", "[auto]") {
+    const SceneStatistics sponza = sponza_statistics();
+    const std::vector<CandidateEstimate> prior = prior_estimates(sponza, 16, kPixels);
+    REQUIRE(prior.size() == 7);  // every flat candidate; no top level without instances
+    for (size_t i = 1; i < prior.size(); ++i) CHECK(prior[i - 1].time_to_image_ms(16) <= prior[i].time_to_image_ms(16));
+    // This "machine" traces sbvh's tree at half binned's frame, which no prior expects of an architectural scene.
+    FixedCosts machine = prior_costs(sponza, 16, kPixels);
+    machine.costs["sbvh"].frame_ms = 0.5 * machine.costs["binned"].frame_ms;
+    const AutoChoice choice = choose_builder(sponza, 16, kPixels, machine);
+    CHECK(machine.built.front() == prior.front().builder);
+    CHECK(choice.builder == "sbvh");
+    CHECK(choice.toplevel == "flat");
+    CHECK(std::find(machine.discarded.begin(), machine.discarded.end(), "sbvh") == machine.discarded.end());
+    CHECK(machine.discarded.size() == machine.built.size() - 1);  // every tree but the winner's is let go
+    // The untried candidates are predicted from the measured ones' costs against their priors.
+    for (const CandidateEstimate& c : choice.candidates)
+        if (!c.measured) CHECK(c.note.find("not measured") != std::string::npos);
+    CHECK(choice.reason.find("reducible cover 6.8") != std::string::npos);
+    CHECK(choice.reason.find("16 frames planned: sbvh") != std::string::npos);
+}
+
+TEST_CASE("auto's calibration stays within its budget when the priors hold", "[auto]") {
+    const SceneStatistics sponza = sponza_statistics();
+    for (const int frames : {1, 16, 256}) {
+        FixedCosts machine = prior_costs(sponza, frames, kPixels);
+        const AutoChoice choice = choose_builder(sponza, frames, kPixels, machine);
+        const CandidateEstimate best = prior_estimates(sponza, frames, kPixels).front();
+        CAPTURE(frames);
+        CHECK(choice.builder == best.builder);  // measurement confirms the priors' winner
+        CHECK(choice.calibration_ms <= choice.budget_ms);
+        CHECK(choice.budget_ms == Approx(kCalibrationBudget * best.time_to_image_ms(frames)));
+    }
+    // One frame: bittner's second-long build can neither win nor fit the budget, so it is never built.
+    FixedCosts machine = prior_costs(sponza, 1, kPixels);
+    choose_builder(sponza, 1, kPixels, machine);
+    CHECK(std::find(machine.built.begin(), machine.built.end(), "bittner") == machine.built.end());
+    // 256 frames: the budget is seconds, and every candidate is measured.
+    machine = prior_costs(sponza, 256, kPixels);
+    choose_builder(sponza, 256, kPixels, machine);
+    CHECK(machine.built.size() == 7);
+}
+
+TEST_CASE("auto splits where splitting pays on this machine, not where the statistics alone say so", "[auto]") {
+    // Slivers (the foliage's statistics): the priors expect splits to pay 2.7x.
+    SceneStatistics foliage;
+    foliage.triangles = foliage.unique_triangles = 48000, foliage.box_excess = 24.0, foliage.reducible_cover = 54.1;
+    FixedCosts no_gain = prior_costs(foliage, 256, kPixels);
+    for (const char* split : {"sbvh", "esc", "bonsai-split"}) no_gain.costs[split].frame_ms = no_gain.costs["binned"].frame_ms;
+    CHECK(choose_builder(foliage, 256, kPixels, no_gain).builder == "binned");  // same frames, the cheaper build
+    // Where they do pay, the one with the best frame wins many frames, the cheapest build one frame.
+    FixedCosts gain = prior_costs(foliage, 256, kPixels);
+    gain.costs["sbvh"].frame_ms = 0.9 * gain.costs["esc"].frame_ms;
+    CHECK(choose_builder(foliage, 256, kPixels, gain).builder == "sbvh");
+    FixedCosts one = prior_costs(foliage, 1, kPixels);
+    CHECK(choose_builder(foliage, 1, kPixels, one).builder == prior_estimates(foliage, 1, kPixels).front().builder);
+}
+
+TEST_CASE("auto chooses two-level only with instances, and only two-level past the flattening limit", "[auto]") {
+    SceneStatistics zoo = sponza_statistics();
+    zoo.unique_triangles = 150000, zoo.triangles = 64 * zoo.unique_triangles, zoo.camera_inside = false;
+    const std::vector<CandidateEstimate> zoo_candidates = prior_estimates(zoo, 16, kPixels);
+    CHECK(std::any_of(zoo_candidates.begin(), zoo_candidates.end(), [](const CandidateEstimate& c) { return c.toplevel == "rebraid"; }));
+    FixedCosts machine = prior_costs(zoo, 16, kPixels);
+    CHECK(choose_builder(zoo, 16, kPixels, machine).toplevel == "rebraid");
+    zoo.triangles = 1024 * zoo.unique_triangles;  // 150 M triangles flattened: past the limit
+    const std::vector<CandidateEstimate> only = prior_estimates(zoo, 1, kPixels);
+    REQUIRE(only.size() == 1);
+    CHECK(only.front().toplevel == "rebraid");
+    for (const CandidateEstimate& c : prior_estimates(sponza_statistics(), 1, kPixels)) CHECK(c.toplevel == "flat");
+}
+
+TEST_CASE("auto's explanation lists every candidate and the choice", "[auto]") {
+    const SceneStatistics sponza = sponza_statistics();
+    FixedCosts machine = prior_costs(sponza, 16, kPixels);
+    const AutoChoice choice = choose_builder(sponza, 16, kPixels, machine);
+    const std::string text = explain(choice, 16);
+    for (const CandidateEstimate& c : choice.candidates) CHECK(text.find(c.note) != std::string::npos);
+    CHECK(choice.candidates.size() == 7);
+    CHECK(text.find("chosen: " + choice.builder) != std::string::npos);
+    CHECK(text.find("TTI@16") != std::string::npos);
+}
+
+TEST_CASE("a frame's sample traces the frame's own paths, each pixel of a sampled tile once", "[auto]") {
+    const Scene scene = load_scene("gen:box?tris=2000&seed=3");
+    const FlatScene flat = flatten(scene);
+    const auto accel = make_canopy_accelerator(scene, flat, CanopyOptions{});
+    accel->prepare();
+    accel->build();
+    FrameSettings settings;
+    settings.width = 45, settings.height = 30;  // tiles cut by both edges
+    const ShadingScene shading{flat, settings};
+    const PinholeCamera camera(scene_camera(scene, flat), settings.width, settings.height);
+    struct Through {
+        const Accelerator& accel;
+        bool closest(const Ray& ray, Hit& hit) const { return (hit = accel.trace(ray)).found(); }
+    } tracer{*accel};
+    Image image(settings.width, settings.height);
+    const auto whole = render_sample(tracer, shading, camera, 3, 1);
+    CHECK(whole.second == 45u * 30u);
+    CHECK(whole.first == accel->render(shading, camera, 3, image));  // the same paths as the frame's
+    // A tile in 4 of the 6 x 4 tiles: one in each run of 4, the edge tiles cut to the frame.
+    uint64_t pixels = 0;
+    for (uint64_t k = 0; k < 6; ++k) {
+        const uint64_t tile = sample_tile(k, 4);
+        CHECK(tile / 4 == k);
+        pixels += uint64_t(std::min(8, 45 - 8 * int(tile % 6)) * std::min(8, 30 - 8 * int(tile / 6)));
+    }
+    CHECK(render_sample(tracer, shading, camera, 3, 4).second == pixels);
+}
+
+TEST_CASE("auto builds the tree it chose on the machine at hand", "[auto]") {
     // The choice is a registered builder, and the accelerator built with it reports it.
     const Scene scene = load_scene("gen:box?tris=2000&seed=3");
     const FlatScene flat = flatten(scene);

@@ -162,7 +162,8 @@ std::vector<SaMax> sa_max_values_of(const std::string& builder, const BenchOptio
 
 std::vector<Entry> make_entries(const Scene& scene, const FlatScene& flat, const BenchOptions& o, int threads) {
     std::vector<Entry> entries;
-    const uint64_t pixels = uint64_t(o.width) * uint64_t(o.height);
+    FrameSettings frame;  // the frame auto rows plan for, as render_frames sets it
+    frame.width = o.width, frame.height = o.height, frame.max_bounces = o.bounces, frame.material_albedo = o.material_albedo;
     for (const std::string& toplevel : o.toplevels)
         for (const std::string& builder : toplevel == "flat" || o.blas_builders.empty() ? o.builders : o.blas_builders)
             for (const std::string& kernel : o.kernels)
@@ -193,7 +194,7 @@ std::vector<Entry> make_entries(const Scene& scene, const FlatScene& flat, const
                             if (toplevel != o.toplevels.front()) continue;  // auto chooses the top level itself
                             for (int frames : o.frames_planned) {
                                 CanopyOptions planned = options;
-                                planned.toplevel = "flat", planned.frames_planned = frames, planned.pixels = pixels;
+                                planned.toplevel = "flat", planned.frames_planned = frames, planned.planned_frame = frame;
                                 entries.push_back({make_canopy_accelerator(scene, flat, planned)});
                             }
                         }
@@ -299,6 +300,18 @@ void print_table(const std::vector<Entry>& entries, uint64_t tris, SceneReport& 
                        100.0 * e.sort_share(), double(e.stream->bytes.load()) / 1e6);
 }
 
+// An auto row's calibration, from its last build: every candidate, measured or predicted.
+nlohmann::json auto_json(const AutoChoice* choice, int frames) {
+    if (!choice) return nullptr;
+    nlohmann::json candidates = nlohmann::json::array();
+    for (const CandidateEstimate& c : choice->candidates)
+        candidates.push_back({{"builder", c.builder}, {"toplevel", c.toplevel}, {"measured", c.measured},
+                              {"build_ms", c.build_ms}, {"frame_ms", c.frame_ms},
+                              {"sample_ms", c.measured ? nlohmann::json(c.sample_ms) : nlohmann::json(nullptr)},
+                              {"time_to_image_ms", c.time_to_image_ms(frames)}, {"note", c.note}});
+    return {{"calibration_ms", choice->calibration_ms}, {"budget_ms", choice->budget_ms}, {"candidates", candidates}};
+}
+
 // The rows of one thread count.
 nlohmann::json results_json(const std::vector<Entry>& entries, uint64_t tris) {
     nlohmann::json results = nlohmann::json::array();
@@ -313,6 +326,7 @@ nlohmann::json results_json(const std::vector<Entry>& entries, uint64_t tris) {
                            {"kernel", canopy ? nlohmann::json(e.accel->kernel()) : nlohmann::json(nullptr)},
                            {"chosen", e.accel->chosen().empty() ? nlohmann::json(nullptr) : nlohmann::json(e.accel->chosen())},
                            {"reason", e.accel->reason().empty() ? nlohmann::json(nullptr) : nlohmann::json(e.accel->reason())},
+                           {"auto", auto_json(e.accel->auto_choice(), e.accel->frames_planned())},
                            {"frames_planned", e.accel->frames_planned() ? nlohmann::json(e.accel->frames_planned()) : nlohmann::json(nullptr)},
                            {"quality", canopy ? nlohmann::json(nullptr) : nlohmann::json(e.accel->quality())},
                            {"tracer", tracer_name(e.tracer)},
@@ -496,10 +510,12 @@ nlohmann::json dynamic_json(const std::vector<Entry>& entries, const BenchOption
             {"results", results}};
 }
 
-void report_static(const std::vector<Entry>& entries, uint64_t tris, SceneReport& out) {
+void report_static(const std::vector<Entry>& entries, uint64_t tris, bool explain, SceneReport& out) {
     print_table(entries, tris, out);
     for (const Entry& e : entries) {
         if (!e.accel->reason().empty()) out.printf("%s: %s\n", e.label().c_str(), e.accel->reason().c_str());
+        if (const AutoChoice* choice = e.accel->auto_choice(); choice && explain)
+            out.printf("%s", canopy::explain(*choice, e.accel->frames_planned()).c_str());
         if (e.report.top_level_ms)
             out.printf("%s: object trees %.2f ms, top level %.3f ms (fastest of the builds) over %llu BRefs\n", e.label().c_str(),
                        *e.report.objects_ms, *e.report.top_level_ms, (unsigned long long)*e.report.brefs);
@@ -558,7 +574,7 @@ nlohmann::json bench_static(const BenchOptions& o, LoadedScene& loaded, SceneRep
         build_all(entries, o.builds);
         render_frames(entries, loaded.scene, loaded.flat, o, nullptr);
         for (Entry& e : entries) e.report = e.accel->report(o.epo);
-        report_static(entries, tris, out);
+        report_static(entries, tris, o.explain, out);
         for (nlohmann::json& row : results_json(entries, tris)) results.push_back(std::move(row));
     }
     return to_json(results, o, tris);

@@ -30,6 +30,7 @@ struct BenchOptions {
     int builds = 20;
     int frames = 10;
     std::vector<int> frames_planned{16};  // `--builder auto` rows: one per value, each planning for that many frames
+    bool explain = false;                 // `--builder auto` rows: print every candidate's costs and the choice
     std::vector<int> threads{0};  // a whole run per count, each with its own table and rows (0: all threads)
     int width = 1024, height = 768;
     int bounces = 8;

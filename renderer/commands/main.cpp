@@ -76,6 +76,7 @@ int main(int argc, char** argv) {
     render->add_option("--blas-builder", r.blas_builder, "Two-level top levels: builder of every object BVH (default: --builder)");
     render->add_option("--frames-planned", r.frames_planned, "Frames that --builder auto plans for (default: --spp)")
         ->check(CLI::Range(1, 1 << 24));
+    render->add_flag("--explain", r.explain, "--builder auto: every candidate's predicted or measured build and frame time, and the choice");
     render->add_option("--kernel", r.kernel, "Traversal kernel: auto (widest), bvh2, bvh4, bvh8")->capture_default_str();
     render->add_option("--accel", r.accel, "canopy or embree")->check(CLI::IsMember({"canopy", "embree"}))->capture_default_str();
     render->add_option("--embree-quality", r.embree_quality, "low, medium or high")->capture_default_str();
@@ -122,6 +123,7 @@ int main(int argc, char** argv) {
         ->delimiter(',');
     bench->add_option("--frames-planned", b.frames_planned, "Frames that --builder auto plans time to image for (a row each)")
         ->delimiter(',')->check(CLI::Range(1, 1 << 24))->capture_default_str();
+    bench->add_flag("--explain", b.explain, "--builder auto: every candidate's predicted or measured build and frame time, and the choice");
     bench->add_option("--kernel", b.kernels, "Kernels: auto (widest), bvh2, bvh4, bvh8")->delimiter(',')->capture_default_str();
     bench->add_option("--accel", accels, "Reference accelerators in the same run: embree")->delimiter(',')
         ->check(CLI::IsMember({"embree"}));

@@ -75,6 +75,16 @@ struct PreparedRender {
     double build_ms = 0;
 };
 
+FrameSettings frame_settings(const RenderOptions& o) {
+    FrameSettings settings;
+    settings.width = o.size[0], settings.height = o.size[1], settings.max_bounces = o.bounces;
+    settings.material_albedo = o.material_albedo;
+    settings.tracer = o.tracer == "stream" ? TracerKind::Stream : TracerKind::Single;
+    settings.stream_paths = o.stream_paths;
+    settings.batch_traversal = parse_batch_traversal(o.batch_traversal);
+    return settings;
+}
+
 void prepare_render(RenderOptions& o, PreparedRender& p) {
     check_blas_builder(o.blas_builder, {o.toplevel});
     if (!o.blas_builder.empty()) o.builder = o.blas_builder;  // a two-level render has no flat BVH
@@ -82,11 +92,12 @@ void prepare_render(RenderOptions& o, PreparedRender& p) {
                                                : BuildPlan{o.builder, kernel_width(o.kernel), o.toplevel != "flat"};
     p.scene = load_scene_within_memory(o.scene, {&plan, 1}, o.memory_limit);
     p.flat = flatten(p.scene);
+    CanopyOptions options{o.builder, o.start, o.kernel, o.traversal == "robust", o.intersector == "watertight", o.toplevel,
+                          o.frames_planned ? o.frames_planned : o.spp};
+    options.planned_frame = frame_settings(o);
+    options.collapse = parse_collapse_method(o.collapse);
     p.accel = o.accel == "embree" ? make_embree_accelerator(p.flat, o.embree_quality, o.threads)
-                                  : make_canopy_accelerator(p.scene, p.flat, {o.builder, o.start, o.kernel, o.traversal == "robust", o.intersector == "watertight", o.toplevel,
-                                                                             o.frames_planned ? o.frames_planned : o.spp,
-                                                                             uint64_t(o.size[0]) * uint64_t(o.size[1]),
-                                                                             parse_collapse_method(o.collapse)});
+                                  : make_canopy_accelerator(p.scene, p.flat, options);
     const auto start = std::chrono::steady_clock::now();
     p.accel->prepare();
     p.accel->build();
@@ -113,12 +124,7 @@ void run_render(RenderOptions o) {
         return;
     }
 
-    FrameSettings settings;
-    settings.width = o.size[0], settings.height = o.size[1], settings.max_bounces = o.bounces;
-    settings.material_albedo = o.material_albedo;
-    settings.tracer = o.tracer == "stream" ? TracerKind::Stream : TracerKind::Single;
-    settings.stream_paths = o.stream_paths;
-    settings.batch_traversal = parse_batch_traversal(o.batch_traversal);
+    const FrameSettings settings = frame_settings(o);
     const ShadingScene shading{p.flat, settings};
     // One bar, rank 0's, when its stderr is a terminal. Open MPI hands ranks their stderr as a pipe (and stdout as
     // a terminal even when mpirun's output goes to a file), so under mpirun there is none.
@@ -138,6 +144,8 @@ void run_render(RenderOptions o) {
                                      : (p.accel->builder() + (p.accel->chosen().empty() ? "" : " -> " + p.accel->chosen())).c_str(),
                 p.build_ms, o.spp, ranks.c_str(), render_s, double(image.rays) / render_s / 1e6, image.sums.mean(o.spp),
                 o.output.c_str());
+    if (const AutoChoice* choice = p.accel->auto_choice(); choice && o.explain)
+        std::printf("auto: %s\n%s", p.accel->reason().c_str(), explain(*choice, p.accel->frames_planned()).c_str());
 }
 
 }  // namespace canopy

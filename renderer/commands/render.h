@@ -16,6 +16,7 @@ struct RenderOptions {
     std::string toplevel = "flat";
     std::string blas_builder;  // two-level top levels: the object trees' builder ("" for --builder)
     int frames_planned = 0;
+    bool explain = false;  // --builder auto: print every candidate's costs and the choice
     std::string embree_quality = "medium";
     int spp = 1, threads = 0, bounces = 8;
     std::vector<int> size{1024, 768};
