@@ -5,9 +5,9 @@
 // double and rounded to float once, so a last-bit difference of libm or of FMA contraction in a
 // double almost never reaches the stored floats.
 //
-// Triangle counts are exact for box, city, foliage, mirror and triangles. Cylinders (open: 2 triangles per side)
-// and surface (closed) have even counts, so an odd N gives N + 1. Below a small minimum (box 118, city 12, foliage 14,
-// mirror 144, surface 18, cylinders 6) the minimum is produced.
+// Triangle counts are exact for box, city, foliage, mirror and triangles. Cylinders (open: 2 triangles per side),
+// room and surface (closed) have even counts, so an odd N gives N + 1. Below a small minimum (box 118, city 12,
+// foliage 14, mirror 144, room 108, surface 18, cylinders 6) the minimum is produced.
 #include "scenes/loaders.h"
 
 #include <glm/geometric.hpp>
@@ -15,6 +15,7 @@
 
 #include <algorithm>
 #include <charconv>
+#include <cstring>
 #include <cmath>
 #include <set>
 #include <string_view>
@@ -67,6 +68,7 @@ Scene generate_city(const GeneratorSpec& spec);
 Scene generate_cylinders(const GeneratorSpec& spec);
 Scene generate_foliage(const GeneratorSpec& spec);
 Scene generate_mirror(const GeneratorSpec& spec);
+Scene generate_room(const GeneratorSpec& spec);
 Scene generate_surface(const GeneratorSpec& spec);
 Scene generate_triangles(const GeneratorSpec& spec);
 
@@ -84,6 +86,7 @@ constexpr Generator kGenerators[] = {
     {"cylinders", generate_cylinders, 1},
     {"foliage", generate_foliage, 2},
     {"mirror", generate_mirror, 1},
+    {"room", generate_room, 1},
     {"surface", generate_surface, 1},
     {"triangles", generate_triangles, 3},
 };
@@ -107,7 +110,7 @@ GeneratorSpec parse_spec(const std::string& spec) {
     if (!find_generator(parsed.generator))
         spec_error(spec,
                    "unknown generator '" + parsed.generator +
-                       "' (known: box, city, cylinders, foliage, mirror, surface, triangles)");
+                       "' (known: box, city, cylinders, foliage, mirror, room, surface, triangles)");
     if (question == std::string_view::npos) return parsed;
     std::set<std::string> seen;
     for (std::string_view query = rest.substr(question + 1);;) {
@@ -629,6 +632,50 @@ Scene generate_surface(const GeneratorSpec& spec) {
     const uint64_t base_cells = uint64_t(cols) * rows;
     add_grid(mesh, cols, rows, GridWrap::both, EvenSelection{cells - base_cells, base_cells}, 0, point);
     return std::move(mesh).into_scene(spec.text, {{0, 1.7, 2.2}, {0, 0, 0}, {0, 1, 0}, 50.0f});
+}
+
+// ---- gen:room: a closed room as a scanner captures it, seen from inside: one closed surface of compact triangles of
+// similar size (as gen:surface's), its walls, floor and ceiling bulging inwards where furniture and fittings stood,
+// and the scanner's noise on every vertex. A cube of n x n quads a face, each point moved towards the centre.
+
+struct Bulge {
+    dvec3 center;  // on the cube's surface
+    double radius, depth;
+};
+
+// Scanner noise of +-0.4% of the cube's half size: a function of the point alone, so that faces meeting at an edge
+// move their shared points alike and the surface stays closed.
+double scan_noise(const dvec3& p) {
+    uint64_t h = 0x9E3779B97F4A7C15ull;
+    for (int axis = 0; axis < 3; ++axis) {
+        uint64_t bits;
+        std::memcpy(&bits, &p[axis], sizeof bits);
+        h = (h ^ bits) * 0xBF58476D1CE4E5B9ull;
+        h ^= h >> 29;
+    }
+    return 0.004 * (double(h >> 11) * 0x1.0p-53 * 2.0 - 1.0);
+}
+
+Scene generate_room(const GeneratorSpec& spec) {
+    Random random(spec.seed);
+    std::vector<Bulge> bulges;
+    for (int k = 0; k < 16; ++k) {
+        dvec3 center = random.point_in_box(-1.0, 1.0);
+        center[random.integer(0, 2)] = random.integer(0, 1) ? 1.0 : -1.0;
+        bulges.push_back({center, random.uniform(0.1, 0.4), random.uniform(0.05, 0.25)});
+    }
+    const dvec3 size(2.5, 1.3, 2.0);  // a room's proportions: wider than deep, lower than both
+    MeshBuilder mesh;
+    mesh.begin_object("room");
+    add_cube_with_budget(mesh, std::max<uint64_t>(spec.triangles + (spec.triangles & 1), 108), [&](const dvec3& p) {
+        double inwards = 0.0;
+        for (const Bulge& b : bulges) {
+            const dvec3 d = (p - b.center) / b.radius;
+            inwards += b.depth * std::exp(-glm::dot(d, d));
+        }
+        return p * size * std::max(0.3, 1.0 - inwards + scan_noise(p));  // never through the centre
+    });
+    return std::move(mesh).into_scene(spec.text, {{0.4, -0.1, 1.3}, {-0.8, -0.5, -2.0}, {0, 1, 0}, 60.0f});
 }
 
 // ---- gen:triangles: large random triangles overlapping in [-1, 1]^3 (adversarial for any BVH).

@@ -9,7 +9,7 @@ Scene load_obj(const std::string& path);         // one mesh, objects from o/g g
 // baseColorFactor and emissiveFactor as materials.
 Scene load_gltf(const std::string& path);
 Scene load_scene_json(const std::string& path);  // ../shared/scenes/README.md format
-Scene generate_scene(const std::string& spec);   // "gen:box|city|cylinders|foliage|mirror|surface|triangles[?tris=N&seed=S]"
+Scene generate_scene(const std::string& spec);   // "gen:box|city|cylinders|foliage|mirror|room|surface|triangles[?tris=N&seed=S]"
 // The most vertices and triangles generate_scene(spec) makes, from the spec alone; throws InputError for a bad spec.
 SceneSize generated_scene_size(const std::string& spec);
 Scene default_scene();                           // small, embedded, no files needed

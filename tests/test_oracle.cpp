@@ -9,7 +9,7 @@ TEST_CASE("builders and kernels agree with brute force on procedural scenes", "[
     const std::string specs[] = {scaled_spec("box", 12000, 3), scaled_spec("cylinders", 12000, 4),
                                  scaled_spec("mirror", 12000, 7), scaled_spec("surface", 12000, 5),
                                  scaled_spec("triangles", 3000, 6), scaled_spec("foliage", 6000, 8),
-                                 scaled_spec("city", 6000, 9)};
+                                 scaled_spec("city", 6000, 9), scaled_spec("room", 6000, 10)};
     for (const std::string& spec : specs) {
         const FlatScene flat = flatten(load_scene(spec));
         check_against_oracle(flat.triangles, random_rays(flat.triangles, scaled(100000), 17), spec);

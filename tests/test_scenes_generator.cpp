@@ -2,6 +2,7 @@
 #include "scenes_test_support.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <map>
 #include <set>
@@ -12,7 +13,7 @@ using Catch::Matchers::Contains;
 
 namespace {
 
-const char* const generators[] = {"box", "city", "cylinders", "foliage", "mirror", "surface", "triangles"};
+const char* const generators[] = {"box", "city", "cylinders", "foliage", "mirror", "room", "surface", "triangles"};
 
 std::string spec(const std::string& generator, uint64_t tris, uint64_t seed) {
     return "gen:" + generator + "?tris=" + std::to_string(tris) + "&seed=" + std::to_string(seed);
@@ -56,12 +57,14 @@ TEST_CASE("generators produce exactly N triangles where the shape allows", "[sce
         // Open cylinders and closed surfaces have an even count: an odd N gives N + 1.
         CHECK(triangle_count(spec("cylinders", n, 1)) == n + n % 2);
         CHECK(triangle_count(spec("surface", n, 1)) == n + n % 2);
+        CHECK(triangle_count(spec("room", n, 1)) == n + n % 2);
     }
     // Below each shape's minimum, the minimum.
     CHECK(triangle_count("gen:box?tris=1") == 118);
     CHECK(triangle_count("gen:cylinders?tris=1") == 6);
     CHECK(triangle_count("gen:mirror?tris=1") == 144);
     CHECK(triangle_count("gen:surface?tris=1") == 18);
+    CHECK(triangle_count("gen:room?tris=1") == 108);
     CHECK(triangle_count("gen:triangles?tris=1") == 1);
     CHECK(triangle_count("gen:foliage?tris=1") == 14);  // the trunk and one leaf
     CHECK(triangle_count("gen:city?tris=1") == 12);     // the ground and one building
@@ -135,6 +138,35 @@ TEST_CASE("gen:surface is closed: every edge is shared by exactly two triangles"
         const std::map<std::pair<uint32_t, uint32_t>, int> uses = edge_uses(mesh);
         CHECK(std::all_of(uses.begin(), uses.end(), [](const auto& e) { return e.second == 2; }));
     }
+}
+
+TEST_CASE("gen:room is a closed scan of compact triangles, seen from inside", "[scenes][generators]") {
+    for (uint64_t n : {108u, 5001u, 40000u}) {
+        INFO("tris=" << n);
+        const Scene scene = generate_scene(spec("room", n, 6));
+        // Closed where faces meet too: every edge, by its end points' positions, is shared by exactly two triangles.
+        std::map<std::pair<std::array<float, 3>, std::array<float, 3>>, int> uses;
+        const auto key = [](const Vec3& p) { return std::array<float, 3>{p.x, p.y, p.z}; };
+        const FlatScene flat = flatten(scene);
+        for (const Triangle& t : flat.triangles) {
+            REQUIRE(triangle_area(t) > 0.0f);
+            const Vec3 corners[3] = {t.v0, t.v1, t.v2};
+            for (int k = 0; k < 3; ++k) ++uses[std::minmax(key(corners[k]), key(corners[(k + 1) % 3]))];
+        }
+        CHECK(std::all_of(uses.begin(), uses.end(), [](const auto& e) { return e.second == 2; }));
+        // Seen from inside: the eye within the bounds, and the scene's statistics say so.
+        const Vec3 eye = scene.camera->eye;
+        CHECK(glm::all(glm::greaterThan(eye, flat.bounds.lower)));
+        CHECK(glm::all(glm::lessThan(eye, flat.bounds.upper)));
+    }
+    // Compact triangles, as a scan's (gen:surface's about 8), not slivers.
+    CHECK(median_box_to_area_ratio(generate_scene("gen:room?tris=20000")) < 12.0);
+    // The walls bulge and carry noise: not a box of flat faces.
+    const FlatScene flat = flatten(generate_scene("gen:room?tris=20000&seed=2"));
+    std::set<float> heights;
+    for (const Triangle& t : flat.triangles)
+        if (glm::normalize(geometric_normal(t)).y > 0.99f) heights.insert(t.v0.y);
+    CHECK(heights.size() > 100);
 }
 
 TEST_CASE("gen:mirror is one crack-free surface, open only at its hole and flange", "[scenes][generators]") {
