@@ -1,9 +1,9 @@
 #pragma once
 // `--builder auto`: "model only what a scene requires", measured rather than assumed. Cheap statistics (one pass
-// over the triangles) order the candidates by a prior prediction of their time to image (build + frames x frame
-// time); then auto builds candidates on the machine at hand and traces a small sample of the planned frame's
-// pixels through each, re-predicting the untried ones from what it measured, while the calibration's waste stays
-// within a share of the best time to image found. The winner's tree is the one built during the calibration.
+// over the triangles) give each candidate a prior prediction of its time to image (build + frames x frame time);
+// then auto builds candidates on the machine at hand and traces a small sample of the planned frame's pixels
+// through each, re-predicting the untried ones from what it measured, while the calibration's waste stays within a
+// share of the best time to image found. The winner's tree is the one built during the calibration.
 #include "scenes/scene.h"
 
 #include <string>
@@ -60,7 +60,8 @@ struct AutoChoice {
     std::string reason;             // one line: the statistics, the calibration and the winner's times
     std::vector<CandidateEstimate> candidates;  // in the order auto tried or ruled them out
     double calibration_ms = 0.0;    // builds of the losers and every sample: what measuring cost on top of the winner
-    double budget_ms = 0.0;         // what the calibration was allowed to waste
+    double budget_ms = 0.0;         // what the calibration may waste: kCalibrationBudget of the winner's time to image
+    double time_to_image_ms = 0.0;  // predicted for auto itself: every build and sample, and the winner's frames
 };
 
 // The candidates, build and frame costs predicted from the statistics alone (the order the calibration tries
@@ -70,9 +71,11 @@ std::vector<CandidateEstimate> prior_estimates(const SceneStatistics& stats, int
 // The calibration may waste (build losers, trace samples) this share of the best time to image it has measured.
 constexpr double kCalibrationBudget = 0.05;
 
-// Chooses the candidate with the least time to image for `frames` frames of `pixels` pixels: tries the predicted
-// best first, then every candidate predicted to beat the best measured, or cheap enough to measure within the
-// budget; predicts the untried ones by scaling their priors by what the measured ones took against theirs.
+// Chooses a candidate for `frames` frames of `pixels` pixels. Measures first the cheapest build predicted near the
+// least time to image; then, in the order of what each would cost from here (build + frames), every candidate
+// predicted to save more than its build against the best measured frames, and every other whose build and sample
+// fit the budget; predicts the untried ones by scaling their priors by what the measured ones took against theirs.
+// A measured tree's build is spent, so the measured candidate of the least frame time wins.
 AutoChoice choose_builder(const SceneStatistics& stats, int frames, uint64_t pixels, Calibration& calibration);
 
 // --explain: one line per candidate (predicted or measured build and frame, time to image, note), then the winner.

@@ -362,39 +362,52 @@ constexpr uint64_t kPixels = 1024 * 768;
 
 }  // namespace
 
-TEST_CASE("auto measures the predicted best first and trusts what it measured over its priors", "[auto]") {
+// What a sample costs auto in all: the measured candidates' samples.
+double samples_ms(const AutoChoice& choice) {
+    double sum = 0.0;
+    for (const CandidateEstimate& c : choice.candidates) sum += c.sample_ms;
+    return sum;
+}
+
+TEST_CASE("auto measures the cheapest build near the predicted best first, and trusts what it measured", "[auto]") {
     const SceneStatistics sponza = sponza_statistics();
     const std::vector<CandidateEstimate> prior = prior_estimates(sponza, 16, kPixels);
     REQUIRE(prior.size() == 7);  // every flat candidate; no top level without instances
     for (size_t i = 1; i < prior.size(); ++i) CHECK(prior[i - 1].time_to_image_ms(16) <= prior[i].time_to_image_ms(16));
+    const CandidateEstimate* first = &prior.front();
+    for (const CandidateEstimate& c : prior)
+        if (c.time_to_image_ms(16) <= 1.1 * prior.front().time_to_image_ms(16) && c.build_ms < first->build_ms) first = &c;
     // This "machine" traces sbvh's tree at half binned's frame, which no prior expects of an architectural scene.
     FixedCosts machine = prior_costs(sponza, 16, kPixels);
     machine.costs["sbvh"].frame_ms = 0.5 * machine.costs["binned"].frame_ms;
     const AutoChoice choice = choose_builder(sponza, 16, kPixels, machine);
-    CHECK(machine.built.front() == prior.front().builder);
+    CHECK(machine.built.front() == first->builder);
     CHECK(choice.builder == "sbvh");
     CHECK(choice.toplevel == "flat");
     CHECK(std::find(machine.discarded.begin(), machine.discarded.end(), "sbvh") == machine.discarded.end());
     CHECK(machine.discarded.size() == machine.built.size() - 1);  // every tree but the winner's is let go
-    // The untried candidates are predicted from the measured ones' costs against their priors.
     for (const CandidateEstimate& c : choice.candidates)
         if (!c.measured) CHECK(c.note.find("not measured") != std::string::npos);
     CHECK(choice.reason.find("reducible cover 6.8") != std::string::npos);
     CHECK(choice.reason.find("16 frames planned: sbvh") != std::string::npos);
+    // Its own time to image: every build and sample, and the winner's frames.
+    double builds = 0.0;
+    for (const CandidateEstimate& c : choice.candidates)
+        if (c.measured) builds += c.build_ms;
+    CHECK(choice.time_to_image_ms == Approx(builds + samples_ms(choice) + 16 * machine.costs["sbvh"].frame_ms));
 }
 
-TEST_CASE("auto's calibration stays within its budget when the priors hold", "[auto]") {
+TEST_CASE("auto stays within 10% of the best time to image when the priors hold", "[auto]") {
     const SceneStatistics sponza = sponza_statistics();
     for (const int frames : {1, 16, 256}) {
         FixedCosts machine = prior_costs(sponza, frames, kPixels);
         const AutoChoice choice = choose_builder(sponza, frames, kPixels, machine);
         const CandidateEstimate best = prior_estimates(sponza, frames, kPixels).front();
-        CAPTURE(frames);
-        CHECK(choice.builder == best.builder);  // measurement confirms the priors' winner
-        CHECK(choice.calibration_ms <= choice.budget_ms);
-        CHECK(choice.budget_ms == Approx(kCalibrationBudget * best.time_to_image_ms(frames)));
+        CAPTURE(frames, choice.builder, best.builder);
+        CHECK(choice.time_to_image_ms <= 1.1 * best.time_to_image_ms(frames));
+        CHECK(choice.calibration_ms <= choice.budget_ms + samples_ms(choice) + best.build_ms);
     }
-    // One frame: bittner's second-long build can neither win nor fit the budget, so it is never built.
+    // One frame: bittner's second-long build can neither pay for itself nor fit the budget, so it is never built.
     FixedCosts machine = prior_costs(sponza, 1, kPixels);
     choose_builder(sponza, 1, kPixels, machine);
     CHECK(std::find(machine.built.begin(), machine.built.end(), "bittner") == machine.built.end());
@@ -409,14 +422,14 @@ TEST_CASE("auto splits where splitting pays on this machine, not where the stati
     SceneStatistics foliage;
     foliage.triangles = foliage.unique_triangles = 48000, foliage.box_excess = 24.0, foliage.reducible_cover = 54.1;
     FixedCosts no_gain = prior_costs(foliage, 256, kPixels);
-    for (const char* split : {"sbvh", "esc", "bonsai-split"}) no_gain.costs[split].frame_ms = no_gain.costs["binned"].frame_ms;
-    CHECK(choose_builder(foliage, 256, kPixels, no_gain).builder == "binned");  // same frames, the cheaper build
-    // Where they do pay, the one with the best frame wins many frames, the cheapest build one frame.
+    for (const char* split : {"sbvh", "esc", "bonsai-split"}) no_gain.costs[split].frame_ms = 1.2 * no_gain.costs["binned"].frame_ms;
+    CHECK(choose_builder(foliage, 256, kPixels, no_gain).builder == "binned");
+    // Where they do pay, the one with the best frame wins many frames.
     FixedCosts gain = prior_costs(foliage, 256, kPixels);
     gain.costs["sbvh"].frame_ms = 0.9 * gain.costs["esc"].frame_ms;
     CHECK(choose_builder(foliage, 256, kPixels, gain).builder == "sbvh");
     FixedCosts one = prior_costs(foliage, 1, kPixels);
-    CHECK(choose_builder(foliage, 1, kPixels, one).builder == prior_estimates(foliage, 1, kPixels).front().builder);
+    CHECK(choose_builder(foliage, 1, kPixels, one).time_to_image_ms <= 1.1 * prior_estimates(foliage, 1, kPixels).front().time_to_image_ms(1));
 }
 
 TEST_CASE("auto chooses two-level only with instances, and only two-level past the flattening limit", "[auto]") {

@@ -33,7 +33,9 @@ struct MeshInstance {
 };
 
 struct AccelOptions {
-    std::string builder = "auto";  // a name of registered_builders(), or "auto": chosen from scene statistics
+    // A name of registered_builders(), or "auto": candidates built and timed on a sample of 16 planned frames of the
+    // protocol's path tracer (1024 x 768, 8 bounces, the scene's default camera), the least time to image kept.
+    std::string builder = "auto";
     std::string kernel = "auto";   // "bvh2", "bvh4", "bvh8", or "auto": the widest this build and CPU run
     bool robust = true;            // traversal that never misses a box the ray touches; false: the fast mode
     bool watertight = true;        // no ray slips between triangles sharing an edge; false: Möller–Trumbore

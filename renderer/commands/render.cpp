@@ -20,7 +20,7 @@ namespace canopy {
 std::string builder_names() {
     std::string names;
     for (const BuilderName& b : all_builders()) names += (names.empty() ? "" : ", ") + b.name;
-    return names + ", or auto (chosen from scene statistics for --frames-planned)";
+    return names + ", or auto (candidates built and timed on a sample of the frame, for --frames-planned)";
 }
 
 void print_progress(float fraction) {
