@@ -22,6 +22,9 @@ struct SceneStatistics {
     // by Crofton's formula, how many more triangle boxes than triangles a random ray through the scene pierces, an
     // upper bound on the tests per ray that splitting triangles can save.
     double reducible_cover = 0.0;
+    // Sum of A_ideal over the sum of triangle-box areas: the fill below which early split clipping's automatic
+    // SA_max splits (accel/builders/early_split_clipping.h); from it up, `esc` builds binned's tree.
+    double box_fill = 1.0;
     // The camera's eye inside the scene's bounds: a room seen from within, where paths bounce to the bounce limit
     // (crytek-sponza, sibenik, conference: 8.3 to 9 rays a pixel), not an object seen from outside (1.2 to 5.4).
     bool camera_inside = false;

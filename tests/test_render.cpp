@@ -3,6 +3,7 @@
 #include "renderer/accelerator.h"
 #include "renderer/commands/bench.h"
 #include "renderer/auto_builder.h"
+#include "accel/builders/early_split_clipping.h"
 #include "renderer/commands/heatmap.h"
 
 #include <OpenImageIO/imageio.h>
@@ -354,7 +355,7 @@ FixedCosts prior_costs(const SceneStatistics& stats, int frames, uint64_t pixels
 SceneStatistics sponza_statistics() {
     SceneStatistics s;
     s.triangles = s.unique_triangles = 262205;
-    s.box_excess = 1.48, s.reducible_cover = 6.8, s.camera_inside = true;
+    s.box_excess = 1.48, s.reducible_cover = 6.8, s.camera_inside = true, s.box_fill = 0.36;
     return s;
 }
 
@@ -372,7 +373,7 @@ double samples_ms(const AutoChoice& choice) {
 TEST_CASE("auto measures the cheapest build near the predicted best first, and trusts what it measured", "[auto]") {
     const SceneStatistics sponza = sponza_statistics();
     const std::vector<CandidateEstimate> prior = prior_estimates(sponza, 16, kPixels);
-    REQUIRE(prior.size() == 7);  // every flat candidate; no top level without instances
+    REQUIRE(prior.size() == 6);  // every flat candidate but esc, which splits nothing here; no top level
     for (size_t i = 1; i < prior.size(); ++i) CHECK(prior[i - 1].time_to_image_ms(16) <= prior[i].time_to_image_ms(16));
     const CandidateEstimate* first = &prior.front();
     for (const CandidateEstimate& c : prior)
@@ -414,22 +415,43 @@ TEST_CASE("auto stays within 10% of the best time to image when the priors hold"
     // 256 frames: the budget is seconds, and every candidate is measured.
     machine = prior_costs(sponza, 256, kPixels);
     choose_builder(sponza, 256, kPixels, machine);
-    CHECK(machine.built.size() == 7);
+    CHECK(machine.built.size() == 6);
 }
 
 TEST_CASE("auto splits where splitting pays on this machine, not where the statistics alone say so", "[auto]") {
     // Slivers (the foliage's statistics): the priors expect splits to pay 2.7x.
     SceneStatistics foliage;
     foliage.triangles = foliage.unique_triangles = 48000, foliage.box_excess = 24.0, foliage.reducible_cover = 54.1;
+    foliage.box_fill = 0.031;
     FixedCosts no_gain = prior_costs(foliage, 256, kPixels);
     for (const char* split : {"sbvh", "esc", "bonsai-split"}) no_gain.costs[split].frame_ms = 1.2 * no_gain.costs["binned"].frame_ms;
-    CHECK(choose_builder(foliage, 256, kPixels, no_gain).builder == "binned");
+    // At 256 frames every candidate is measured: the least frame wins, a tree that splits nothing (bittner's, 0.87x).
+    const std::string chosen = choose_builder(foliage, 256, kPixels, no_gain).builder;
+    CHECK(chosen == "bittner");
+    for (const auto& [name, costs] : no_gain.costs) CHECK(no_gain.costs[chosen].frame_ms <= costs.frame_ms);
     // Where they do pay, the one with the best frame wins many frames.
     FixedCosts gain = prior_costs(foliage, 256, kPixels);
     gain.costs["sbvh"].frame_ms = 0.9 * gain.costs["esc"].frame_ms;
     CHECK(choose_builder(foliage, 256, kPixels, gain).builder == "sbvh");
     FixedCosts one = prior_costs(foliage, 1, kPixels);
     CHECK(choose_builder(foliage, 1, kPixels, one).time_to_image_ms <= 1.1 * prior_estimates(foliage, 1, kPixels).front().time_to_image_ms(1));
+}
+
+TEST_CASE("auto measures esc only where its automatic SA_max splits", "[auto]") {
+    const auto has_esc = [](const SceneStatistics& stats) {
+        const std::vector<CandidateEstimate> candidates = prior_estimates(stats, 16, kPixels);
+        return std::any_of(candidates.begin(), candidates.end(), [](const CandidateEstimate& c) { return c.builder == "esc"; });
+    };
+    SceneStatistics stats = sponza_statistics();
+    CHECK_FALSE(has_esc(stats));
+    stats.box_fill = 0.099;
+    CHECK(has_esc(stats));
+    // The statistics' fill is the one esc's rule reads: generated slivers split, a generated room does not.
+    const Scene foliage = load_scene("gen:foliage?tris=3000&seed=2"), room = load_scene("gen:room?tris=3000&seed=2");
+    CHECK(scene_statistics(foliage, flatten(foliage)).box_fill < kEscMaxFillToSplit);
+    CHECK(scene_statistics(room, flatten(room)).box_fill > kEscMaxFillToSplit);
+    const FlatScene flat = flatten(foliage);
+    CHECK(std::isfinite(automatic_sa_max(flat.triangles, make_prim_refs(flat.triangles))));
 }
 
 TEST_CASE("auto chooses two-level only with instances, and only two-level past the flattening limit", "[auto]") {
@@ -452,7 +474,7 @@ TEST_CASE("auto's explanation lists every candidate and the choice", "[auto]") {
     const AutoChoice choice = choose_builder(sponza, 16, kPixels, machine);
     const std::string text = explain(choice, 16);
     for (const CandidateEstimate& c : choice.candidates) CHECK(text.find(c.note) != std::string::npos);
-    CHECK(choice.candidates.size() == 7);
+    CHECK(choice.candidates.size() == 6);
     CHECK(text.find("chosen: " + choice.builder) != std::string::npos);
     CHECK(text.find("TTI@16") != std::string::npos);
 }

@@ -17,9 +17,7 @@ namespace canopy {
 namespace {
 
 constexpr size_t kGrain = 1024;
-// The automatic SA_max's constants (early_split_clipping.h): split scenes whose boxes are filled below 10% on the
-// whole, into pieces of at most 8 median ideal areas.
-constexpr double kMaxFillToSplit = 0.1;
+// The automatic SA_max's pieces (early_split_clipping.h): at most 8 median ideal areas.
 constexpr double kIdealAreasPerPiece = 8.0;
 
 // Alg. 4 with an explicit stack; depth-first, left before right, so the pieces come out in a fixed order.
@@ -47,13 +45,6 @@ uint32_t clip_until_small(const Triangle& t, const BBox& whole, float sa_max, Em
     return pieces;
 }
 
-// A_ideal of Karras and Aila 2013 (sec. 5): the summed box areas of infinitely fine pieces of the triangle,
-// twice its projected area on the three axis planes.
-float ideal_area(const Triangle& t) {
-    const Vec3 n = geometric_normal(t);
-    return std::abs(n.x) + std::abs(n.y) + std::abs(n.z);
-}
-
 // A_ideal of each reference's triangle.
 std::vector<float> ideal_areas(std::span<const Triangle> triangles, const std::vector<PrimRef>& refs) {
     std::vector<float> ideal(refs.size());
@@ -78,7 +69,7 @@ float automatic_sa_max(std::span<const Triangle> triangles, const std::vector<Pr
     const double ideal_sum = parallel::sum_in_order(n, 16 * 1024, [&](size_t i) { return double(ideal[i]); });
     const double box_sum = parallel::sum_in_order(n, 16 * 1024, [&](size_t i) { return double(refs[i].bounds().area()); });
     const double fill = box_sum > 0.0 ? ideal_sum / box_sum : 1.0;
-    if (fill >= kMaxFillToSplit) return std::numeric_limits<float>::infinity();
+    if (fill >= kEscMaxFillToSplit) return std::numeric_limits<float>::infinity();
     const auto sa_max = float(kIdealAreasPerPiece * median_of(ideal));
     return sa_max > 0.0f ? sa_max : std::numeric_limits<float>::infinity();  // most triangles degenerate
 }

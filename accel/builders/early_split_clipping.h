@@ -1,6 +1,7 @@
 #pragma once
 #include "accel/builder.h"
 
+#include <cmath>
 #include <span>
 #include <vector>
 
@@ -30,6 +31,14 @@ uint64_t early_split_clip_count(std::span<const Triangle> triangles, const std::
 // Measured fills: every scene in ../shared/scenes, gen:surface, gen:box, gen:triangles 0.31-0.48; gen:cylinders 0.03.
 // Returns infinity for no splitting.
 float automatic_sa_max(std::span<const Triangle> triangles, const std::vector<PrimRef>& refs);
+constexpr double kEscMaxFillToSplit = 0.1;  // the fill from which the automatic SA_max splits nothing
+
+// A_ideal of Karras and Aila 2013 (sec. 5): the summed box areas of infinitely fine pieces of the triangle,
+// twice its projected area on the three axis planes.
+inline float ideal_area(const Triangle& t) {
+    const Vec3 n = geometric_normal(t);
+    return std::abs(n.x) + std::abs(n.y) + std::abs(n.z);
+}
 
 // `sa_max` in box area units for this scene: infinity for no splitting. Throws std::invalid_argument for a value
 // that is not finite and positive.
