@@ -225,14 +225,6 @@ public:
         });
     }
 
-    // render_sample through this tree (single-ray tracer); returns {rays, pixels} traced.
-    std::pair<uint64_t, uint64_t> render_sample(const ShadingScene& scene, const PinholeCamera& camera, uint32_t stride) const {
-        return with_kernel([&]<int N, bool Robust, class Test>(const auto& bvh) {
-            using Layout = std::decay_t<decltype(bvh)>;
-            return canopy::render_sample(CanopyTracer<Layout, Robust, Test>{bvh}, scene, camera, 0, stride);
-        });
-    }
-
     Hit trace(const Ray& ray) const override {
         return with_kernel([&]<int N, bool Robust, class Test>(const auto& bvh) {
             Hit hit;
@@ -329,7 +321,8 @@ private:
 class AutoAccelerator final : public Accelerator, private Calibration {
 public:
     AutoAccelerator(const Scene& scene, const FlatScene& flat, const CanopyOptions& options)
-        : scene_(scene), flat_(flat), options_(options), sample_frame_(options.planned_frame) {
+        : scene_(scene), flat_(flat), options_(options), sample_frame_(options.planned_frame),
+          scratch_(options.planned_frame.width, options.planned_frame.height) {
         sample_frame_.tracer = TracerKind::Single;
         stride_ = sample_stride(options.frames_planned);
         // A sample of a few milliseconds times its tiles' dispatch as much as their paths (armadillo, 16 frames: 1.6 ms
@@ -401,21 +394,28 @@ private:
     }
 
     std::pair<double, double> sample_frame() override {
-        const ShadingScene shading{flat_, sample_frame_};
         const PinholeCamera camera(scene_camera(scene_, flat_), sample_frame_.width, sample_frame_.height);
         const double pixels = double(sample_frame_.width) * double(sample_frame_.height);
         // Half a sample first, untimed, through the first tree: the first sample after waking the threads took 1.3x
         // to 1.6x the next ones through the same tree (gen:foliage, esc).
         const auto warm_up = std::chrono::steady_clock::now();
-        if (!warmed_up_) last_->render_sample(shading, camera, stride_ * 2), warmed_up_ = true;
+        if (!warmed_up_) trace_sample(camera, stride_ * 2), warmed_up_ = true;
         for (uint32_t stride = stride_;; stride = std::max(1u, stride / 4)) {
             const auto start = std::chrono::steady_clock::now();
-            const uint64_t traced = last_->render_sample(shading, camera, stride).second;
+            trace_sample(camera, stride);
             const auto end = std::chrono::steady_clock::now();
             const double ms = std::chrono::duration<double, std::milli>(end - start).count();
             if (ms < min_sample_ms_ && stride > 1) continue;  // too short to time: 4x the tiles
-            return {std::chrono::duration<double, std::milli>(end - warm_up).count(), traced ? ms * pixels / double(traced) : 0.0};
+            const double traced = double(traced_pixels(sample_frame_.width, sample_frame_.height, stride));
+            return {std::chrono::duration<double, std::milli>(end - warm_up).count(), traced > 0.0 ? ms * pixels / traced : 0.0};
         }
+    }
+
+    // The last build traces the planned frame's sample of one tile in `stride`, through the single-ray tracer.
+    void trace_sample(const PinholeCamera& camera, uint32_t stride) {
+        FrameSettings settings = sample_frame_;
+        settings.sample_stride = stride;
+        last_->render(ShadingScene{flat_, settings}, camera, 0, scratch_, {});
     }
 
     void discard(const std::string& builder, const std::string& toplevel) override { trees_.erase(key(builder, toplevel)); }
@@ -433,6 +433,7 @@ private:
     uint32_t stride_ = 1;         // the sample traces one tile in stride_
     bool warmed_up_ = false;      // this build's calibration has traced its untimed warm-up
     double min_sample_ms_ = 0.0;  // a shorter sample is traced again with 4x the tiles
+    Image scratch_;               // the samples' radiance, which nothing reads
     AutoChoice choice_;
     std::map<std::string, std::unique_ptr<CanopyAccelerator>> trees_;  // the calibration's trees still wanted
     const CanopyAccelerator* last_ = nullptr;

@@ -30,6 +30,9 @@ struct FrameSettings {
     BatchTraversal batch_traversal = BatchTraversal::Packet;  // stream: how canopy's kernels trace a batch
     bool embree_packets = false;  // stream: Embree's batches in rtcIntersect16 packets, not through rtcIntersect1M
     int max_bounces = 8;           // at most max_bounces + 1 closest-hit rays per path
+    // The single tracer traces only a sample of the frame's pixels, one 8 x 8 tile in each `sample_stride` (1: the
+    // whole frame): what `--builder auto` times its candidates with.
+    uint32_t sample_stride = 1;
     bool material_albedo = false;  // protocol: albedo 0.8 everywhere unless the scene asks for Kd
     float albedo = 0.8f;
 };
@@ -99,67 +102,71 @@ Vec3 trace_path(const Tracer& tracer, const ShadingScene& scene, Ray& ray, Rng& 
     return path.radiance;
 }
 
-// Renders one sample per pixel of frame `frame` and adds it to `accumulated`. Returns rays traced.
-// `on_tile` (optional) is called after each tile with the fraction of the frame done.
+// A frame's sample (FrameSettings::sample_stride > 1): square tiles of kSampleTile pixels a side (neighbours' paths
+// share nodes and cache lines as in a whole frame, which shorter runs of pixels did not reproduce: trees of more nodes
+// looked slower than they trace), one tile in each `stride` tiles in raster order, at a scrambled place, so that the
+// tiles cover the image evenly without following its columns.
+constexpr int kSampleTile = 8;
+inline uint64_t sample_tile(uint64_t k, uint32_t stride) { return k * stride + (k * 2654435761u) % stride; }
+
+// Calls f(x0, y0, size) for each tile render_frame traces: every kFrameTile tile, or the sample's tiles.
+constexpr int kFrameTile = 16;
+template <class F>
+void for_each_tile_of(int w, uint32_t stride, F&& f, int first, int last) {
+    const int size = stride > 1 ? kSampleTile : kFrameTile, tiles_x = (w + size - 1) / size;
+    for (int k = first; k < last; ++k) {
+        const uint64_t tile = stride > 1 ? sample_tile(uint64_t(k), stride) : uint64_t(k);
+        f(int(tile % uint64_t(tiles_x)) * size, int(tile / uint64_t(tiles_x)) * size, size);
+    }
+}
+// How many tiles render_frame traces (the loop's range) with this stride.
+inline int traced_tiles(int w, int h, uint32_t stride) {
+    const int size = stride > 1 ? kSampleTile : kFrameTile;
+    const uint64_t tiles = uint64_t((w + size - 1) / size) * uint64_t((h + size - 1) / size);
+    if (stride <= 1) return int(tiles);
+    uint64_t k = tiles / stride;
+    while (k > 0 && sample_tile(k - 1, stride) >= tiles) --k;
+    while (sample_tile(k, stride) < tiles) ++k;
+    return int(k);
+}
+// The pixels render_frame traces with this stride.
+inline uint64_t traced_pixels(int w, int h, uint32_t stride) {
+    uint64_t pixels = 0;
+    for_each_tile_of(w, stride, [&](int x0, int y0, int size) {
+        pixels += uint64_t(std::min(x0 + size, w) - x0) * uint64_t(std::min(y0 + size, h) - y0);
+    }, 0, traced_tiles(w, h, stride));
+    return pixels;
+}
+
+// Renders one sample per pixel of frame `frame` (of the sample's pixels only, with settings.sample_stride > 1) and
+// adds it to `accumulated`. Returns rays traced. `on_tile` (optional) is called after each tile with the fraction of
+// the frame done.
 template <class Tracer>
 uint64_t render_frame(const Tracer& tracer, const ShadingScene& scene, const PinholeCamera& camera,
                       uint32_t frame, Image& accumulated, const std::function<void(float)>& on_tile = {}) {
-    constexpr int kTile = 16;
     const int w = scene.settings.width, h = scene.settings.height;
-    const int tiles_x = (w + kTile - 1) / kTile, tiles_y = (h + kTile - 1) / kTile;
-    const int tiles = tiles_x * tiles_y;
+    const uint32_t stride = scene.settings.sample_stride;
+    const int tiles = traced_tiles(w, h, stride);
     std::vector<uint64_t> tile_rays(size_t(tiles), 0);
     std::atomic<int> done{0};
     tbb::parallel_for(0, tiles, [&](int tile) {
-        const int x0 = (tile % tiles_x) * kTile, y0 = (tile / tiles_x) * kTile;
         uint64_t rays = 0;
-        for (int y = y0; y < std::min(y0 + kTile, h); ++y) {
-            for (int x = x0; x < std::min(x0 + kTile, w); ++x) {
-                Rng rng(uint64_t(y) * uint64_t(w) + uint64_t(x), frame);
-                const float u = rng.next_float(), v = rng.next_float();
-                Ray ray = camera.generate(x, y, u, v);  // built in place: trace_path takes it by reference
-                accumulated.add(x, y, trace_path(tracer, scene, ray, rng, rays));
+        for_each_tile_of(w, stride, [&](int x0, int y0, int size) {
+            for (int y = y0; y < std::min(y0 + size, h); ++y) {
+                for (int x = x0; x < std::min(x0 + size, w); ++x) {
+                    Rng rng(uint64_t(y) * uint64_t(w) + uint64_t(x), frame);
+                    const float u = rng.next_float(), v = rng.next_float();
+                    Ray ray = camera.generate(x, y, u, v);  // built in place: trace_path takes it by reference
+                    accumulated.add(x, y, trace_path(tracer, scene, ray, rng, rays));
+                }
             }
-        }
+        }, tile, tile + 1);
         tile_rays[size_t(tile)] = rays;
         if (on_tile) on_tile(float(done.fetch_add(1) + 1) / float(tiles));
     });
     uint64_t total = 0;
     for (uint64_t r : tile_rays) total += r;
     return total;
-}
-
-// A frame's sample: square tiles of kSampleTile pixels a side (neighbours' paths share nodes and cache lines as in a
-// whole frame, which shorter runs of pixels did not reproduce: trees of more nodes looked slower than they trace), one
-// tile in each `stride` tiles in raster order, at a scrambled place, so that the tiles cover the image evenly without
-// following its columns.
-constexpr int kSampleTile = 8;
-inline uint64_t sample_tile(uint64_t k, uint32_t stride) { return k * stride + (k * 2654435761u) % stride; }
-
-// Traces the sample tiles of frame `frame`, one path a pixel as render_frame traces it, and discards their radiance:
-// what the frame's rays cost, measured on a share of them. Returns {rays traced, pixels traced}.
-template <class Tracer>
-std::pair<uint64_t, uint64_t> render_sample(const Tracer& tracer, const ShadingScene& scene, const PinholeCamera& camera,
-                                            uint32_t frame, uint32_t stride) {
-    const int w = scene.settings.width, h = scene.settings.height;
-    const uint64_t tiles_x = uint64_t(w + kSampleTile - 1) / kSampleTile, tiles = tiles_x * uint64_t((h + kSampleTile - 1) / kSampleTile);
-    const uint64_t samples = (tiles + stride - 1) / stride;
-    std::atomic<uint64_t> total_rays{0}, total_pixels{0};
-    tbb::parallel_for(uint64_t(0), samples, [&](uint64_t k) {
-        const uint64_t tile = sample_tile(k, stride);
-        if (tile >= tiles) return;
-        const int x0 = int(tile % tiles_x) * kSampleTile, y0 = int(tile / tiles_x) * kSampleTile;
-        uint64_t rays = 0, traced = 0;
-        for (int y = y0; y < std::min(y0 + kSampleTile, h); ++y)
-            for (int x = x0; x < std::min(x0 + kSampleTile, w); ++x, ++traced) {
-                Rng rng(uint64_t(y) * uint64_t(w) + uint64_t(x), frame);
-                const float u = rng.next_float(), v = rng.next_float();
-                Ray ray = camera.generate(x, y, u, v);
-                trace_path(tracer, scene, ray, rng, rays);
-            }
-        total_rays += rays, total_pixels += traced;
-    });
-    return {total_rays.load(), total_pixels.load()};
 }
 
 }  // namespace canopy

@@ -12,6 +12,7 @@
 #include <algorithm>
 #include <filesystem>
 #include <map>
+#include <set>
 #include <fstream>
 
 using namespace canopy;
@@ -479,32 +480,36 @@ TEST_CASE("auto's explanation lists every candidate and the choice", "[auto]") {
     CHECK(text.find("TTI@16") != std::string::npos);
 }
 
-TEST_CASE("a frame's sample traces the frame's own paths, each pixel of a sampled tile once", "[auto]") {
+TEST_CASE("a frame's sample traces the frame's own paths in its tiles, and nothing else", "[auto]") {
     const Scene scene = load_scene("gen:box?tris=2000&seed=3");
     const FlatScene flat = flatten(scene);
     const auto accel = make_canopy_accelerator(scene, flat, CanopyOptions{});
     accel->prepare();
     accel->build();
-    FrameSettings settings;
-    settings.width = 45, settings.height = 30;  // tiles cut by both edges
-    const ShadingScene shading{flat, settings};
-    const PinholeCamera camera(scene_camera(scene, flat), settings.width, settings.height);
-    struct Through {
-        const Accelerator& accel;
-        bool closest(const Ray& ray, Hit& hit) const { return (hit = accel.trace(ray)).found(); }
-    } tracer{*accel};
-    Image image(settings.width, settings.height);
-    const auto whole = render_sample(tracer, shading, camera, 3, 1);
-    CHECK(whole.second == 45u * 30u);
-    CHECK(whole.first == accel->render(shading, camera, 3, image));  // the same paths as the frame's
-    // A tile in 4 of the 6 x 4 tiles: one in each run of 4, the edge tiles cut to the frame.
-    uint64_t pixels = 0;
+    FrameSettings whole_frame, sample;
+    whole_frame.width = sample.width = 45, whole_frame.height = sample.height = 30;  // tiles cut by both edges
+    sample.sample_stride = 4;
+    const PinholeCamera camera(scene_camera(scene, flat), 45, 30);
+    Image whole(45, 30), sampled(45, 30);
+    accel->render(ShadingScene{flat, whole_frame}, camera, 3, whole);
+    accel->render(ShadingScene{flat, sample}, camera, 3, sampled);
+    // A tile in 4 of the 6 x 4 tiles of 8 x 8 pixels: one in each run of 4, the edge tiles cut to the frame.
+    std::set<std::pair<int, int>> in_sample;
     for (uint64_t k = 0; k < 6; ++k) {
         const uint64_t tile = sample_tile(k, 4);
         CHECK(tile / 4 == k);
-        pixels += uint64_t(std::min(8, 45 - 8 * int(tile % 6)) * std::min(8, 30 - 8 * int(tile / 6)));
+        for (int y = 8 * int(tile / 6); y < std::min(8 * int(tile / 6) + 8, 30); ++y)
+            for (int x = 8 * int(tile % 6); x < std::min(8 * int(tile % 6) + 8, 45); ++x) in_sample.insert({x, y});
     }
-    CHECK(render_sample(tracer, shading, camera, 3, 4).second == pixels);
+    CHECK(traced_pixels(45, 30, 4) == in_sample.size());
+    CHECK(traced_pixels(45, 30, 1) == 45u * 30u);
+    const std::vector<float> all = whole.average(1), part = sampled.average(1);
+    for (int y = 0; y < 30; ++y)
+        for (int x = 0; x < 45; ++x)
+            for (int c = 0; c < 3; ++c) {
+                const size_t i = (size_t(y) * 45 + size_t(x)) * 3 + size_t(c);
+                CHECK(part[i] == (in_sample.count({x, y}) ? all[i] : 0.0f));
+            }
 }
 
 TEST_CASE("auto builds the tree it chose on the machine at hand", "[auto]") {
