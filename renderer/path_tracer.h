@@ -109,32 +109,31 @@ Vec3 trace_path(const Tracer& tracer, const ShadingScene& scene, Ray& ray, Rng& 
 constexpr int kSampleTile = 8;
 inline uint64_t sample_tile(uint64_t k, uint32_t stride) { return k * stride + (k * 2654435761u) % stride; }
 
-// Calls f(x0, y0, size) for each tile render_frame traces: every kFrameTile tile, or the sample's tiles.
+// The k-th tile render_frame traces: every kFrameTile tile in raster order, or the sample's k-th tile.
 constexpr int kFrameTile = 16;
-template <class F>
-void for_each_tile_of(int w, uint32_t stride, F&& f, int first, int last) {
+struct TileRect {
+    int x0, y0, size;
+};
+inline TileRect traced_tile(int k, int w, uint32_t stride) {
     const int size = stride > 1 ? kSampleTile : kFrameTile, tiles_x = (w + size - 1) / size;
-    for (int k = first; k < last; ++k) {
-        const uint64_t tile = stride > 1 ? sample_tile(uint64_t(k), stride) : uint64_t(k);
-        f(int(tile % uint64_t(tiles_x)) * size, int(tile / uint64_t(tiles_x)) * size, size);
-    }
+    const uint64_t tile = stride > 1 ? sample_tile(uint64_t(k), stride) : uint64_t(k);
+    return {int(tile % uint64_t(tiles_x)) * size, int(tile / uint64_t(tiles_x)) * size, size};
 }
-// How many tiles render_frame traces (the loop's range) with this stride.
+// How many tiles render_frame traces with this stride: one in each run of `stride`, and one more where the last,
+// partial run reaches its sampled tile.
 inline int traced_tiles(int w, int h, uint32_t stride) {
     const int size = stride > 1 ? kSampleTile : kFrameTile;
     const uint64_t tiles = uint64_t((w + size - 1) / size) * uint64_t((h + size - 1) / size);
     if (stride <= 1) return int(tiles);
-    uint64_t k = tiles / stride;
-    while (k > 0 && sample_tile(k - 1, stride) >= tiles) --k;
-    while (sample_tile(k, stride) < tiles) ++k;
-    return int(k);
+    return int(tiles / stride + (sample_tile(tiles / stride, stride) < tiles));
 }
 // The pixels render_frame traces with this stride.
 inline uint64_t traced_pixels(int w, int h, uint32_t stride) {
     uint64_t pixels = 0;
-    for_each_tile_of(w, stride, [&](int x0, int y0, int size) {
-        pixels += uint64_t(std::min(x0 + size, w) - x0) * uint64_t(std::min(y0 + size, h) - y0);
-    }, 0, traced_tiles(w, h, stride));
+    for (int k = 0; k < traced_tiles(w, h, stride); ++k) {
+        const TileRect t = traced_tile(k, w, stride);
+        pixels += uint64_t(std::min(t.x0 + t.size, w) - t.x0) * uint64_t(std::min(t.y0 + t.size, h) - t.y0);
+    }
     return pixels;
 }
 
@@ -151,16 +150,15 @@ uint64_t render_frame(const Tracer& tracer, const ShadingScene& scene, const Pin
     std::atomic<int> done{0};
     tbb::parallel_for(0, tiles, [&](int tile) {
         uint64_t rays = 0;
-        for_each_tile_of(w, stride, [&](int x0, int y0, int size) {
-            for (int y = y0; y < std::min(y0 + size, h); ++y) {
-                for (int x = x0; x < std::min(x0 + size, w); ++x) {
-                    Rng rng(uint64_t(y) * uint64_t(w) + uint64_t(x), frame);
-                    const float u = rng.next_float(), v = rng.next_float();
-                    Ray ray = camera.generate(x, y, u, v);  // built in place: trace_path takes it by reference
-                    accumulated.add(x, y, trace_path(tracer, scene, ray, rng, rays));
-                }
+        const TileRect t = traced_tile(tile, w, stride);
+        for (int y = t.y0; y < std::min(t.y0 + t.size, h); ++y) {
+            for (int x = t.x0; x < std::min(t.x0 + t.size, w); ++x) {
+                Rng rng(uint64_t(y) * uint64_t(w) + uint64_t(x), frame);
+                const float u = rng.next_float(), v = rng.next_float();
+                Ray ray = camera.generate(x, y, u, v);  // built in place: trace_path takes it by reference
+                accumulated.add(x, y, trace_path(tracer, scene, ray, rng, rays));
             }
-        }, tile, tile + 1);
+        }
         tile_rays[size_t(tile)] = rays;
         if (on_tile) on_tile(float(done.fetch_add(1) + 1) / float(tiles));
     });
