@@ -97,6 +97,12 @@ struct BinMapping {
     }
 };
 
+// Bins for a node of n references: 4 + n / 20, at most max_bins (Embree's object binning uses the same count).
+// Small nodes, most of a tree's, then set up, sweep and merge a few bins instead of one per reference: binned bvh8
+// builds of crytek-sponza took 1.13x Embree MEDIUM's time (2 threads) against 1.32x with up to a bin a reference,
+// sibenik 1.12x against 1.22x, conference 1.09x against 1.23x, for SAH within 1% and the same frames.
+inline uint32_t object_bin_count(uint32_t max_bins, uint32_t n) { return std::min(max_bins, 4u + n / 20); }
+
 struct BinGrid {
     Box8 boxes[3][kMaxBins];
     uint32_t counts[3][kMaxBins];

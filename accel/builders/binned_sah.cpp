@@ -36,8 +36,7 @@ private:
     void build_subtree(const Range& range, uint32_t node, uint32_t descendants, uint32_t depth) {
         const uint32_t n = range.size();
         if (n > 1 && depth < kMedianFallbackDepth && spread(range.centroids) > 0.0f) {
-            // Fewer bins for small nodes: a bin per reference is enough, and small nodes dominate in number.
-            const BinMapping mapping(range.centroids, std::min(bins_, std::max(n, 4u)));
+            const BinMapping mapping(range.centroids, object_bin_count(bins_, n));
             const Split split = best_split(bin_refs(refs_.data(), range.begin, range.size(), mapping), mapping.bins, settings_);
             const float area = range.bounds.half_area();
             const float split_cost = settings_.costs.inner * area + settings_.costs.triangle * split.cost;

@@ -162,7 +162,7 @@ private:
     }
 
     // Binned SAH over the references' centroids, as the binned builder does (accel/sah_binning.h).
-    uint32_t object_bins(uint32_t n) const { return std::min(object_bins_, std::max(n, 4u)); }
+    uint32_t object_bins(uint32_t n) const { return sah_binning::object_bin_count(object_bins_, n); }
 
     Candidate best_object_split(const Extent& e, const sah_binning::BinMapping& mapping) const {
         const sah_binning::Split split =
@@ -174,7 +174,7 @@ private:
     // Stich et al.: spatial bins over the node's bounds on each axis, a reference that spans several chopped into
     // them (accel/spatial_binning.h). The bins only price splits, so they are computed in float: exact clipping took
     // 28% of a conference build, and the trees came out the same (split_spatially clips references exactly).
-    // As for object bins, small nodes get fewer: a bin per reference is enough.
+    // Small nodes get fewer: a bin per reference is enough.
     static uint32_t spatial_bins(uint32_t n) { return std::clamp<uint32_t>(n, 4, kSpatialBins); }
 
     Candidate best_spatial_split(const Extent& e, const BBox& bounds) const {
