@@ -57,11 +57,11 @@ void check_invariants(const Bvh& bvh, std::span<const Triangle> tris, const std:
 }  // namespace
 
 TEST_CASE("every builder's tree is well formed", "[builders]") {
-    for (const char* spec : {"gen:box?tris=20000&seed=1", "gen:cylinders?tris=20000&seed=2", "gen:triangles?tris=5000&seed=3"}) {
+    for (const std::string& spec : {scaled_spec("box", 20000, 1), scaled_spec("cylinders", 20000, 2), scaled_spec("triangles", 5000, 3)}) {
         const FlatScene flat = flatten(load_scene(spec));
         for (const BuilderEntry& builder : builders()) {
             const BuiltScene built = build_with(builder.name, flat.triangles);
-            check_invariants(built.binary, flat.triangles, std::string(spec) + " / " + builder.name);
+            check_invariants(built.binary, flat.triangles, spec + " / " + builder.name);
             const TreeStats stats = tree_stats(built.binary, flat.triangles.size());
             CHECK(stats.refs_per_triangle >= 1.0);
             CHECK(built.bvh2.nodes.size() == stats.inner_nodes);
@@ -87,18 +87,19 @@ TEST_CASE("binned SAH references each triangle once", "[builders]") {
 
 TEST_CASE("pathological inputs keep trees within the depth limit", "[builders]") {
     std::vector<Triangle> tris;
-    // Triangles at exponentially growing distances: every SAH split peels off very few.
-    for (int i = 0; i < 3000; ++i) {
+    // Triangles at exponentially growing distances (120 scales): every SAH split peels off very few.
+    const int copies = int(scaled(3000, 600));
+    for (int i = 0; i < copies; ++i) {
         const float x = std::ldexp(1.0f, i % 120 - 60);
         tris.push_back({Vec3(x, 0, 0), Vec3(x * 1.001f, x * 1e-3f, 0), Vec3(x, 0, x * 1e-3f)});
     }
     // Many triangles with one centroid.
-    for (int i = 0; i < 3000; ++i) tris.push_back({Vec3(-1, 0, 0), Vec3(1, 0, 0), Vec3(0, float(i % 7), 0)});
+    for (int i = 0; i < copies; ++i) tris.push_back({Vec3(-1, 0, 0), Vec3(1, 0, 0), Vec3(0, float(i % 7), 0)});
     for (const BuilderEntry& builder : builders()) {
         const BuiltScene built = build_with(builder.name, tris);
         check_invariants(built.binary, tris, builder.name);
     }
-    check_against_oracle(tris, random_rays(tris, 5000, 3), "pathological");
+    check_against_oracle(tris, random_rays(tris, scaled(5000, 500), 3), "pathological");
 }
 
 TEST_CASE("a single triangle and a leaf root are traced", "[builders]") {
