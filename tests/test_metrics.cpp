@@ -2,6 +2,7 @@
 #include "accel/metrics.h"
 #include "oracle.h"
 #include "renderer/commands/study.h"
+#include "test_scale.h"
 
 #include <nlohmann/json.hpp>
 
@@ -71,7 +72,7 @@ TEST_CASE("EPO does not count a split triangle's own pieces as overlap", "[metri
 }
 
 TEST_CASE("EPO of built trees is positive, and the same with 1 and 2 threads", "[metrics]") {
-    const FlatScene flat = flatten(load_scene("gen:triangles?tris=2000&seed=5"));
+    const FlatScene flat = flatten(load_scene("gen:triangles?tris=" + std::to_string(scaled(2000, 500)) + "&seed=5"));
     for (const BuilderEntry& builder : builders()) {
         const Bvh bvh = build_with(builder.name, flat.triangles).binary;
         double one, two;

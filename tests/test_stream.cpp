@@ -6,6 +6,7 @@
 #include "oracle.h"
 #include "renderer/accelerator.h"
 #include "renderer/wavefront.h"
+#include "test_scale.h"
 #include "two_level_support.h"
 
 #include <algorithm>
@@ -149,7 +150,7 @@ void check_every_width(const BuiltScene& built, std::span<const Triangle> tris, 
 TEST_CASE("batch queries answer every ray as the single-ray kernel does, in every width and mode", "[stream]") {
     for (const char* spec : {"gen:box?tris=3000&seed=7", "gen:cylinders?tris=2000&seed=3"}) {
         const FlatScene flat = flatten(load_scene(spec));
-        std::vector<Ray> rays = adversarial_rays(flat.triangles, 6000, 11);
+        std::vector<Ray> rays = adversarial_rays(flat.triangles, scaled(6000, 1000), 11);
         const std::vector<Ray> sorted = in_key_order(flat.triangles, rays);
         rays.insert(rays.end(), sorted.begin(), sorted.end());
         const std::vector<Ray> bundles = parallel_bundles(flat.triangles, 4);
@@ -170,7 +171,7 @@ TEST_CASE("batch queries far from the origin answer every ray as the single-ray 
     const Vec3 far(1e7f, -1e9f, 3e11f);
     FlatScene flat = flatten(load_scene("gen:box?tris=3000&seed=5"));
     for (Triangle& t : flat.triangles) t = {t.v0 + far, t.v1 + far, t.v2 + far};
-    const std::vector<Ray> rays = adversarial_rays(flat.triangles, 6000, 12);
+    const std::vector<Ray> rays = adversarial_rays(flat.triangles, scaled(6000, 1000), 12);
     const BuiltScene built = build_with("binned", flat.triangles);
     check_every_width<true, WatertightRay>(built, flat.triangles, rays, "moved box robust watertight");
     check_every_width<false, MollerTrumboreRay>(built, flat.triangles, rays, "moved box fast moller");

@@ -91,7 +91,8 @@ Curve measure(Accelerator& accel, const TradeoffOptions& o, const ShadingScene& 
     accel.build();
     double elapsed = seconds_since(start);
     curve.build_ms = 1e3 * elapsed;
-    for (int frame = 1; frame <= o.max_frames && elapsed < o.seconds; ++frame) {
+    // At least one frame, even when the build alone used the budget: a curve needs a point.
+    for (int frame = 1; frame <= o.max_frames && (frame == 1 || elapsed < o.seconds); ++frame) {
         start = Clock::now();
         accel.render(shading, camera, uint32_t(frame), image);
         elapsed += seconds_since(start);
