@@ -62,14 +62,15 @@ struct PathState {
 // One bounce's shading, shared by every tracer so that `single` and `stream` paths mean the same: a miss adds the
 // white sky and ends the path; a hit adds what its material emits (under --materials; no next-event estimation),
 // takes the albedo and, unless `depth` was the last bounce, turns `ray` into the next bounce's ray. Returns whether
-// the path goes on.
+// the path goes on. `corners`: the hit triangle, when the tracer gave it (else read from the scene).
 [[gnu::always_inline]] inline bool shade_bounce(const ShadingScene& scene, const Ray& ray, const Hit& hit, bool found,
-                                                int depth, PathState& path, Rng& rng, Ray& next) {
+                                                int depth, PathState& path, Rng& rng, Ray& next,
+                                                const Triangle* corners = nullptr) {
     if (!found) {
         path.radiance += path.throughput;  // white sky
         return false;
     }
-    const Triangle& tri = scene.flat.triangles[hit.prim];
+    const Triangle& tri = corners ? *corners : scene.flat.triangles[hit.prim];
     Vec3 n = geometric_normal(tri);
     const float len2 = glm::dot(n, n);
     n = len2 > 0.0f && std::isfinite(len2) ? n / std::sqrt(len2) : -ray.dir;
@@ -96,8 +97,14 @@ Vec3 trace_path(const Tracer& tracer, const ShadingScene& scene, Ray& ray, Rng& 
     for (int depth = 0;; ++depth) {
         Hit hit;
         ++rays;
-        const bool found = tracer.closest(ray, hit);
-        if (!shade_bounce(scene, ray, hit, found, depth, path, rng, ray)) break;
+        if constexpr (requires(Triangle& corners) { tracer.closest(ray, hit, corners); }) {
+            Triangle corners;
+            const bool found = tracer.closest(ray, hit, corners);
+            if (!shade_bounce(scene, ray, hit, found, depth, path, rng, ray, &corners)) break;
+        } else {
+            const bool found = tracer.closest(ray, hit);
+            if (!shade_bounce(scene, ray, hit, found, depth, path, rng, ray)) break;
+        }
     }
     return path.radiance;
 }

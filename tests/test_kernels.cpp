@@ -1,6 +1,9 @@
 // Kernel dispatch and the counting variant of traversal.
 #include "oracle.h"
 
+#include <bit>
+#include <cstring>
+
 using namespace canopy;
 using namespace canopy::test;
 
@@ -187,4 +190,47 @@ TEST_CASE("BBox::contains is inclusive and false for NaN", "[kernels]") {
     CHECK_FALSE(box.contains({0, 2.5f, 0}));
     CHECK_FALSE(box.contains({0, 0, std::numeric_limits<float>::quiet_NaN()}));
     CHECK_FALSE(BBox{}.contains({0, 0, 0}));
+}
+
+template <int N, class TriangleTest>
+void check_nearest_corners(const WideBvh<N>& bvh, std::span<const Triangle> tris, const std::vector<Ray>& rays) {
+    if constexpr (kernel_compiled(N)) {
+        if (!cpu_runs(N)) return;
+        INFO("width " << N);
+        size_t hits = 0;
+        for (const Ray& ray : rays) {
+            Hit plain, hit;
+            NearestCorners<N> nearest;
+            const bool found = traverse<Query::Closest, true, TriangleTest>(bvh, ray, hit, nearest);
+            traverse<Query::Closest, true, TriangleTest>(bvh, ray, plain);
+            REQUIRE(found == plain.found());
+            REQUIRE(hit.prim == plain.prim);
+            REQUIRE(std::bit_cast<uint32_t>(hit.t) == std::bit_cast<uint32_t>(plain.t));
+            if (!found) continue;
+            ++hits;
+            const Triangle corners = nearest.triangle(), &scene = tris[hit.prim];
+            REQUIRE(std::memcmp(&corners, &scene, sizeof(Triangle)) == 0);
+        }
+        CHECK(hits > rays.size() / 4);
+    }
+}
+
+// The path tracer shades a hit with the corners the traversal kept (NearestCorners), not the scene's triangle:
+// they must be that triangle's, bit for bit, for every width, intersector, and with ties between triangles.
+TEST_CASE("the nearest hit's corners are its scene triangle's, bit for bit", "[kernels]") {
+    for (const char* spec : {"gen:box?tris=3000&seed=4", "gen:cylinders?tris=2000&seed=6"}) {
+        INFO(spec);
+        const FlatScene flat = flatten(load_scene(spec));
+        std::vector<Ray> rays = random_rays(flat.triangles, 4000, 13);
+        for (size_t i = 0; i < 2000; ++i) {  // aimed at corners and edge midpoints, which triangles share: ties
+            const Triangle& t = flat.triangles[(i * 7919) % flat.triangles.size()];
+            const Vec3 target = i % 2 ? t.v0 : 0.5f * (t.v1 + t.v2), org = target + Vec3(3.0f, 2.0f + float(i % 5), -4.0f);
+            rays.push_back({org, target - org});
+        }
+        const BuiltScene built = build_with("binned", flat.triangles);
+        check_nearest_corners<2, WatertightRay>(built.bvh2, flat.triangles, rays);
+        check_nearest_corners<4, WatertightRay>(built.bvh4, flat.triangles, rays);
+        check_nearest_corners<8, WatertightRay>(built.bvh8, flat.triangles, rays);
+        check_nearest_corners<8, MollerTrumboreRay>(built.bvh8, flat.triangles, rays);
+    }
 }
