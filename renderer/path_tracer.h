@@ -97,14 +97,12 @@ Vec3 trace_path(const Tracer& tracer, const ShadingScene& scene, Ray& ray, Rng& 
     for (int depth = 0;; ++depth) {
         Hit hit;
         ++rays;
-        if constexpr (requires(Triangle& corners) { tracer.closest(ray, hit, corners); }) {
-            Triangle corners;
-            const bool found = tracer.closest(ray, hit, corners);
-            if (!shade_bounce(scene, ray, hit, found, depth, path, rng, ray, &corners)) break;
-        } else {
-            const bool found = tracer.closest(ray, hit);
-            if (!shade_bounce(scene, ray, hit, found, depth, path, rng, ray)) break;
-        }
+        Triangle corners;
+        const Triangle* given = nullptr;  // the tracer's corners of the hit triangle, where it has them
+        bool found;
+        if constexpr (requires { tracer.closest(ray, hit, corners); }) found = tracer.closest(ray, hit, corners), given = &corners;
+        else found = tracer.closest(ray, hit);
+        if (!shade_bounce(scene, ray, hit, found, depth, path, rng, ray, given)) break;
     }
     return path.radiance;
 }

@@ -3,7 +3,7 @@
 // thread-determinism builds and every builder's structural checks. A CMake cache variable, 1 by default; the
 // sanitizer presets (debug, tsan) set 0.1, because ASan and TSan slow these tests 10 to 50 times (a single oracle
 // test ran 22 minutes under ASan). Scaled down, every test still runs every builder and kernel, on fewer rays and
-// triangles: no test is skipped.
+// triangles: no test is skipped for its size.
 #include <algorithm>
 #include <cstddef>
 #include <cstdint>
