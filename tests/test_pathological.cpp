@@ -13,7 +13,7 @@ using namespace canopy::test;
 namespace {
 
 // The scenes' triangle count (the tests' comment says why not a million).
-const size_t kTriangles = scaled(100'000, 10000);
+const size_t kTriangles = scaled(50'000, 10000);
 constexpr size_t kSampleRays = 256;
 
 std::vector<Triangle> identical_triangles(size_t n) {
@@ -98,7 +98,7 @@ void check_every_builder(std::span<const Triangle> tris, const std::string& scen
 
 }  // namespace
 
-// 100,000 triangles per scene (10,000 under the sanitizer presets' CANOPY_TEST_SCALE): every scene is built by
+// 50,000 triangles per scene (10,000 under the sanitizer presets' CANOPY_TEST_SCALE): every scene is built by
 // all 17 builders and checked against brute force, which at a million triangles per scene took 33 s of CPU for
 // the identical triangles alone and minutes for the six scenes, more than the rest of the suite; the million-
 // triangle runs are in docs/results.md (Hardening).
