@@ -68,6 +68,9 @@ template <>
 struct Simd<8> {
     using F = __m256;
     static F load(const float* p) { return _mm256_load_ps(p); }
+    static F load_bytes(const uint8_t* p) {  // 8 bytes as floats 0 to 255
+        return _mm256_cvtepi32_ps(_mm256_cvtepu8_epi32(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(p))));
+    }
     static F set1(float x) { return _mm256_set1_ps(x); }
     static F low(Broadcast b) { return b; }
     static F zero() { return _mm256_setzero_ps(); }

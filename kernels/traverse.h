@@ -1,9 +1,10 @@
 #pragma once
-// Stack-based traversal of a WideBvh<N>, one template for every width: children tested in one pass (scalar
+// Stack-based traversal of a WideBvh<N> or a CompressedWideBvh<N>, one template for every width and layout: children tested in one pass (scalar
 // for N = 2, SSE for N = 4, AVX for N = 8), visited near to far. Robust = true pads the slab distances so
 // rounding never culls a box the ray crosses (see SlabRay); Robust = false is the fast mode. TriangleTest is
 // WatertightRay (default) or MollerTrumboreRay (fast mode). A Counter other than NoCount records inner nodes,
 // leaves and triangles visited; with NoCount the calls compile to nothing.
+#include "accel/compressed_wide_bvh.h"
 #include "accel/wide_bvh.h"
 #include "kernels/moller_trumbore.h"
 #include "kernels/simd.h"
@@ -198,20 +199,13 @@ template <int N>
     return mask;
 }
 
-// The same for N SIMD lanes. The three axes are combined as a tree seeded with tmin and tmax, not a chain, which
-// shortens each node's critical path.
+// The interval test of N SIMD lanes over the slab distances x (near) and y (far) of each axis. The three axes are
+// combined as a tree seeded with tmin and tmax, not a chain, which shortens each node's critical path.
 template <int N>
-[[gnu::always_inline]] inline uint32_t intersect_children(const WideNode<N>& node, const SlabLanes<N>& r,
-                                                          typename simd::Simd<N>::F tmin, float tmax,
-                                                          std::array<float, N>& tnear) {
+[[gnu::always_inline]] inline uint32_t slab_mask(const typename simd::Simd<N>::F (&x)[3], const typename simd::Simd<N>::F (&y)[3],
+                                                 typename simd::Simd<N>::F tmin, float tmax, std::array<float, N>& tnear) {
     using S = simd::Simd<N>;
     using F = typename S::F;
-    const float* planes = node.planes;
-    F x[3], y[3];  // near and far distances per axis
-    for (int a = 0; a < 3; ++a) {
-        x[a] = S::fmadd(S::load(planes + r.near[a]), r.inv[a], r.near_add[a]);
-        y[a] = S::fmadd(S::load(planes + r.far[a]), r.inv[a], r.far_add[a]);
-    }
     const F t_max = S::set1(tmax);
     const F t0 = S::max_bits(S::max_bits(x[1], tmin), S::max_bits(x[2], S::max_bits(x[0], tmin)));
     const F t1 = S::min_bits(S::min_bits(y[1], t_max), S::min_bits(y[2], S::min_bits(y[0], t_max)));
@@ -219,16 +213,47 @@ template <int N>
     return S::le_mask_bits(t0, t1);
 }
 
+// The same for N SIMD lanes.
+template <int N>
+[[gnu::always_inline]] inline uint32_t intersect_children(const WideNode<N>& node, const SlabLanes<N>& r,
+                                                          typename simd::Simd<N>::F tmin, float tmax,
+                                                          std::array<float, N>& tnear) {
+    using S = simd::Simd<N>;
+    typename S::F x[3], y[3];  // near and far distances per axis
+    for (int a = 0; a < 3; ++a) {
+        x[a] = S::fmadd(S::load(node.planes + r.near[a]), r.inv[a], r.near_add[a]);
+        y[a] = S::fmadd(S::load(node.planes + r.far[a]), r.inv[a], r.far_add[a]);
+    }
+    return slab_mask<N>(x, y, tmin, tmax, tnear);
+}
+
+// The same for a compressed node: each plane decoded by an FMA that rounds nothing (compressed_wide_bvh.h), then
+// the same slab distances. The planes' bytes sit where WideNode's floats do, so the ray's offsets serve both.
+template <int N>
+[[gnu::always_inline]] inline uint32_t intersect_children(const CompressedNode<N>& node, const SlabLanes<N>& r,
+                                                          typename simd::Simd<N>::F tmin, float tmax,
+                                                          std::array<float, N>& tnear) {
+    using S = simd::Simd<N>;
+    typename S::F x[3], y[3];
+    for (int a = 0; a < 3; ++a) {
+        const auto scale = S::set1(node.scale[a]), origin = S::set1(node.origin[a]);
+        x[a] = S::fmadd(S::fmadd(S::load_bytes(node.q + r.near[a]), scale, origin), r.inv[a], r.near_add[a]);
+        y[a] = S::fmadd(S::fmadd(S::load_bytes(node.q + r.far[a]), scale, origin), r.inv[a], r.far_add[a]);
+    }
+    return slab_mask<N>(x, y, tmin, tmax, tnear) & node.valid;
+}
+
 struct StackEntry {
     uint32_t child, count;  // as in WideNode: count 0 is an inner node
     float tnear;
 };
 
-// Prefetches every cache line of a node (one for BVH2, two for BVH4, four for BVH8), or a leaf's first lines.
-template <int N, class Leaf>
-[[gnu::always_inline]] inline void prefetch(const WideNode<N>* nodes, const Leaf* leaves, const StackEntry& e) {
+// Prefetches every cache line of a node (one for BVH2, two for BVH4 and compressed BVH8, four for BVH8), or a
+// leaf's first lines.
+template <class Node, class Leaf>
+[[gnu::always_inline]] inline void prefetch(const Node* nodes, const Leaf* leaves, const StackEntry& e) {
     const char* p = e.count == 0 ? reinterpret_cast<const char*>(nodes + e.child) : reinterpret_cast<const char*>(leaves + e.child);
-    for (size_t line = 0; line < sizeof(WideNode<N>); line += 64) _mm_prefetch(p + line, _MM_HINT_T0);
+    for (size_t line = 0; line < sizeof(Node); line += 64) _mm_prefetch(p + line, _MM_HINT_T0);
 }
 
 // Starts the fetch of a node's child references with that of its boxes, where they lie on a cache line of their
@@ -239,11 +264,17 @@ template <int N>
 [[gnu::always_inline]] inline void prefetch_child_line(const WideNode<N>& node) {
     if constexpr (sizeof(node.planes) % 64 == 0) _mm_prefetch(reinterpret_cast<const char*>(node.child), _MM_HINT_T0);
 }
+// A compressed BVH8 node's second line holds its last planes and its child references.
+template <int N>
+[[gnu::always_inline]] inline void prefetch_child_line(const CompressedNode<N>& node) {
+    _mm_prefetch(reinterpret_cast<const char*>(&node) + 64, _MM_HINT_T0);
+}
 
 // Intersects a leaf's triangles; true when a hit was recorded.
-template <int N, class TriangleTest, class Counter>
-[[gnu::always_inline]] inline bool intersect_leaf(const WideBvh<N>& bvh, const StackEntry& leaf,
+template <class Tree, class TriangleTest, class Counter>
+[[gnu::always_inline]] inline bool intersect_leaf(const Tree& bvh, const StackEntry& leaf,
                                                   const TriangleTest& tri_ray, float tmin, Hit& hit, Counter& counter) {
+    constexpr int N = Tree::kWidth;
     counter.leaf();
     counter.triangles(leaf.count);
     counter.touch(&bvh.leaves[leaf.child], sizeof(bvh.leaves[0]) * (N == 2 ? leaf.count : leaf_entries(N, leaf.count)));
@@ -294,13 +325,13 @@ using NodeRay = std::conditional_t<N == 2, SlabRay<N>, SlabLanes<N>>;
 // The traversal loop of every kernel: from `start` (the root, or any node or leaf of a tree, as the two-level
 // kernels enter object trees), children near to far, leaves handed to `leaf(entry)`, which returns true when it
 // recorded a hit. `hit.t` is the running far limit, held in a local between hits. Tree is anything with `nodes`
-// (WideNode<N>) and `leaves`. Returns true when an any-hit query may stop.
+// (WideNode<N> or CompressedNode<N>) and `leaves`. Returns true when an any-hit query may stop.
 template <Query Q, int N, class Tree, class Counter, class LeafFn>
 [[gnu::always_inline]] inline bool traverse_from(const Tree& tree, StackEntry start, const SlabRay<N>& box_ray,
                                                  float tmin, Hit& hit, Counter& counter, LeafFn&& leaf) {
     // Locals the loop's stores cannot alias, so the compiler keeps them in registers (a node's address is then one
     // multiply-add away, not two dependent loads through `tree`).
-    const WideNode<N>* const nodes = tree.nodes.data();
+    const auto* const nodes = tree.nodes.data();
     const auto* const leaves = tree.leaves.data();
     const NodeRay<N> ray(box_ray);
     const auto t_min = [&] {
@@ -314,7 +345,7 @@ template <Query Q, int N, class Tree, class Counter, class LeafFn>
     for (;;) {
         if (current.count == 0) {
             counter.inner();
-            const WideNode<N>& node = nodes[current.child];
+            const auto& node = nodes[current.child];
             counter.touch(&node, sizeof(node));
             prefetch_child_line(node);
             std::array<float, N> tnear;
@@ -382,6 +413,16 @@ template <Query Q, bool Robust, class TriangleTest, int N, class Tree, class Cou
     traverse_from<Q>(pool, {root, 0, tmin}, box_ray, tmin, hit, counter, leaf);
 }
 
+// A flat tree's walk from its root, `hit` reset to the ray's interval.
+template <Query Q, bool Robust, class TriangleTest, int N, class Tree, class Counter>
+[[gnu::always_inline]] inline bool traverse_flat(const Tree& bvh, const Ray& ray, Hit& hit, Counter& counter) {
+    hit = Hit{};
+    hit.t = ray.tmax;
+    if (bvh.nodes.empty()) return false;
+    traverse_tree<Q, Robust, TriangleTest, N>(bvh, 0, bvh.bounds, bvh.frame, ray, hit, counter);
+    return hit.found();
+}
+
 }  // namespace detail
 
 // Closest hit (Query::Closest) or any hit (Query::Any) in (kernel_tmin(ray), ray.tmax]. For Any, `hit` holds the
@@ -391,20 +432,24 @@ template <Query Q, bool Robust, class TriangleTest, int N, class Tree, class Cou
 // before, 1.22x after; bunny 1.30x, 1.20x). Inlining the whole traversal into the path tracer measured slower.
 template <Query Q, bool Robust = true, class TriangleTest = WatertightRay, int N, class Counter = NoCount>
 [[gnu::noinline]] bool traverse(const WideBvh<N>& bvh, const Ray& ray, Hit& hit, Counter&& counter = {}) {
-    hit = Hit{};
-    hit.t = ray.tmax;
-    if (bvh.nodes.empty()) return false;
-    detail::traverse_tree<Q, Robust, TriangleTest, N>(bvh, 0, bvh.bounds, bvh.frame, ray, hit, counter);
-    return hit.found();
+    return detail::traverse_flat<Q, Robust, TriangleTest, N>(bvh, ray, hit, counter);
+}
+template <Query Q, bool Robust = true, class TriangleTest = WatertightRay, int N, class Counter = NoCount>
+[[gnu::noinline]] bool traverse(const CompressedWideBvh<N>& bvh, const Ray& ray, Hit& hit, Counter&& counter = {}) {
+    return detail::traverse_flat<Q, Robust, TriangleTest, N>(bvh, ray, hit, counter);
 }
 
-template <bool Robust = true, class TriangleTest = WatertightRay, int N>
-bool closest_hit(const WideBvh<N>& bvh, const Ray& ray, Hit& hit) {
+template <bool Robust = true, class TriangleTest = WatertightRay, class Tree>
+bool closest_hit(const Tree& bvh, const Ray& ray, Hit& hit)
+    requires std::is_same_v<Tree, WideBvh<Tree::kWidth>> || std::is_same_v<Tree, CompressedWideBvh<Tree::kWidth>>
+{
     return traverse<Query::Closest, Robust, TriangleTest>(bvh, ray, hit);
 }
 
-template <bool Robust = true, class TriangleTest = WatertightRay, int N>
-bool any_hit(const WideBvh<N>& bvh, const Ray& ray) {
+template <bool Robust = true, class TriangleTest = WatertightRay, class Tree>
+bool any_hit(const Tree& bvh, const Ray& ray)
+    requires std::is_same_v<Tree, WideBvh<Tree::kWidth>> || std::is_same_v<Tree, CompressedWideBvh<Tree::kWidth>>
+{
     Hit hit;
     return traverse<Query::Any, Robust, TriangleTest>(bvh, ray, hit);
 }

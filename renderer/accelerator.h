@@ -89,6 +89,7 @@ struct CanopyOptions {
     int frames_planned = 16;
     FrameSettings planned_frame;
     CollapseMethod collapse = CollapseMethod::Optimal;  // of the binary tree into the wide layout (bvh4, bvh8)
+    NodeLayout layout = NodeLayout::Standard;           // bvh8 nodes as floats, or quantised to bytes
     // Flat trees: the layout's nodes shuffled in memory with this seed after the build (permute_nodes, untimed
     // study experiment); the tree and every answer stay the same.
     std::optional<uint64_t> permute_nodes;

@@ -20,6 +20,10 @@
 namespace canopy {
 namespace {
 
+// The layouts of one flat tree over the scene's triangles, whose leaves hold those triangles.
+template <class Layout>
+constexpr bool is_flat = std::is_same_v<Layout, WideBvh<Layout::kWidth>> || std::is_same_v<Layout, CompressedWideBvh<Layout::kWidth>>;
+
 template <class Layout, bool Robust, class TriangleTest>
 struct CanopyTracer {
     const Layout& bvh;
@@ -27,7 +31,7 @@ struct CanopyTracer {
     // A flat tree's hit with its triangle's corners from the leaf just read (NearestCorners): binned bvh8 frames
     // 9% faster on crytek-sponza, 5% on sibenik, 8% on conference than with the shading reading the scene's.
     bool closest(const Ray& ray, Hit& hit, Triangle& corners) const
-        requires std::is_same_v<Layout, WideBvh<Layout::kWidth>>
+        requires is_flat<Layout>
     {
         NearestCorners<Layout::kWidth> nearest;
         if (!traverse<Query::Closest, Robust, TriangleTest>(bvh, ray, hit, nearest)) return false;
@@ -65,7 +69,8 @@ auto with_modes(const CanopyOptions& o, F&& f) {
     return o.watertight ? f(std::false_type{}, Watertight{}) : f(std::false_type{}, Moller{});
 }
 
-using AnyLayout = std::variant<WideBvh<2>, WideBvh<4>, WideBvh<8>, TwoLevelBvh<2>, TwoLevelBvh<4>, TwoLevelBvh<8>>;
+using AnyLayout = std::variant<WideBvh<2>, WideBvh<4>, WideBvh<8>, CompressedWideBvh<8>, TwoLevelBvh<2>, TwoLevelBvh<4>,
+                               TwoLevelBvh<8>>;
 
 template <int N>
 void collapse_into(AnyLayout& layout, const Bvh& bvh, std::span<const Triangle> triangles, CollapseMethod method) {
@@ -86,6 +91,10 @@ void rebuild_top_level_of(AnyLayout& layout, const TwoLevelInput& input, const T
 
 template <class Layout>
 constexpr bool is_two_level = requires(const Layout& l) { l.instances; };
+
+// The batch kernels (packets, streams) walk standard nodes; a compressed tree answers a batch ray by ray.
+template <class Layout>
+constexpr bool has_batch_kernels = !std::is_same_v<Layout, CompressedWideBvh<Layout::kWidth>>;
 
 TopLevel parse_top_level(const std::string& name) {
     if (name == "two-level") return TopLevel::TwoLevel;
@@ -127,6 +136,12 @@ public:
             find_builder(options.start);
             settings_.start = options.start;
         }
+        if (options.layout == NodeLayout::Compressed) {
+            if (width_ != 8) throw std::invalid_argument("layout 'compressed': kernel bvh8 only, not " + kernel_name(width_));
+            if (options.toplevel != "flat")
+                throw std::invalid_argument("layout 'compressed': flat trees only, not top level '" + options.toplevel + "'");
+            if (!kernel_compiled(8)) throw std::invalid_argument("layout 'compressed' needs the bvh8 kernel, which this build lacks");
+        }
         if (options.toplevel != "flat") {
             if (options.permute_nodes) throw std::invalid_argument("permuted nodes: flat trees only, not top level '" + options.toplevel + "'");
             two_level_settings_.top = parse_top_level(options.toplevel);
@@ -152,8 +167,8 @@ public:
     }
     std::string kernel() const override {
         const bool greedy = options_.collapse == CollapseMethod::Greedy && width_ > 2;  // at width 2 both agree
-        return kernel_name(width_) + (greedy ? " greedy" : "") + (options_.robust ? "" : " fast") + (options_.watertight ? "" : " mt") +
-               (options_.permute_nodes ? " permuted" : "");
+        return kernel_name(width_) + (options_.layout == NodeLayout::Compressed ? " compressed" : "") + (greedy ? " greedy" : "") +
+               (options_.robust ? "" : " fast") + (options_.watertight ? "" : " mt") + (options_.permute_nodes ? " permuted" : "");
     }
     std::string quality() const override { return ""; }
     // "@8x" for early split clipping at another SA_max than the automatic one.
@@ -207,6 +222,8 @@ public:
             std::visit([&]<class Layout>(Layout& bvh) {
                 if constexpr (requires { permute_nodes(bvh, uint64_t{}); }) permute_nodes(bvh, *options_.permute_nodes);
             }, layout_);
+        if constexpr (kernel_compiled(8))
+            if (options_.layout == NodeLayout::Compressed) layout_ = compress(std::get<WideBvh<8>>(std::move(layout_)));
     }
 
     // Model of a rigid move: the placement's transform changes, its object tree does not (sec. 6.3 rebuilds
@@ -229,8 +246,12 @@ public:
                     const std::function<void(float)>& on_tile) const override {
         return with_kernel([&]<int N, bool Robust, class Test>(const auto& bvh) {
             using Layout = std::decay_t<decltype(bvh)>;
-            if (scene.settings.tracer == TracerKind::Stream)
-                return render_frame_stream(CanopyBatchTracer<Layout, Robust, Test>{bvh, scene.settings.batch_traversal}, scene, camera, frame, image, on_tile);
+            if (scene.settings.tracer == TracerKind::Stream) {
+                if constexpr (has_batch_kernels<Layout>)
+                    return render_frame_stream(CanopyBatchTracer<Layout, Robust, Test>{bvh, scene.settings.batch_traversal}, scene, camera, frame, image, on_tile);
+                else
+                    throw std::invalid_argument("layout 'compressed': the single-ray tracer only, not the stream tracer");
+            }
             return render_frame(CanopyTracer<Layout, Robust, Test>{bvh}, scene, camera, frame, image, on_tile);
         });
     }
@@ -265,11 +286,18 @@ public:
 
     void trace_batch(Query query, std::span<const Ray> rays, std::span<Hit> hits) const override {
         with_kernel([&]<int N, bool Robust, class Test>(const auto& bvh) {
-            StreamScratch<N> unused;  // packets need none
-            if (query == Query::Any)
-                traverse_batch<Query::Any, Robust, Test>(bvh, rays, hits, unused, BatchTraversal::Packet);
-            else
-                traverse_batch<Query::Closest, Robust, Test>(bvh, rays, hits, unused, BatchTraversal::Packet);
+            if constexpr (!has_batch_kernels<std::decay_t<decltype(bvh)>>) {  // ray by ray
+                for (size_t i = 0; i < rays.size(); ++i) {
+                    if (query == Query::Any) traverse<Query::Any, Robust, Test>(bvh, rays[i], hits[i]);
+                    else traverse<Query::Closest, Robust, Test>(bvh, rays[i], hits[i]);
+                }
+            } else {
+                StreamScratch<N> unused;  // packets need none
+                if (query == Query::Any)
+                    traverse_batch<Query::Any, Robust, Test>(bvh, rays, hits, unused, BatchTraversal::Packet);
+                else
+                    traverse_batch<Query::Closest, Robust, Test>(bvh, rays, hits, unused, BatchTraversal::Packet);
+            }
         });
     }
 
@@ -286,8 +314,13 @@ public:
         std::visit([&]<class Layout>(const Layout& bvh) {
             if constexpr (!is_two_level<Layout>) {
                 r.bytes = bvh.bytes();
-                r.layout_sah = sah_cost(bvh);
-                if (with_epo) r.layout_epo = epo_cost(bvh, scene_.triangles);
+                // A compressed tree's metrics are those of its decoded boxes.
+                const auto& boxes = [&]() -> decltype(auto) {
+                    if constexpr (std::is_same_v<Layout, CompressedWideBvh<8>>) return decompress(bvh);
+                    else return (bvh);
+                }();
+                r.layout_sah = sah_cost(boxes);
+                if (with_epo) r.layout_epo = epo_cost(boxes, scene_.triangles);
             }
         }, layout_);
         return r;

@@ -127,7 +127,7 @@ std::string optimiser_start(const std::string& builder, const std::string& start
 // that differ only by traversal mode, intersector or collapse are separate builds of the same size.
 std::vector<BuildPlan> build_plans(const BenchOptions& o) {
     std::vector<BuildPlan> plans;
-    const size_t copies = o.traversals.size() * o.intersectors.size() * o.collapses.size();
+    const size_t copies = o.traversals.size() * o.intersectors.size() * o.collapses.size() * o.layouts.size();
     for (const std::string& toplevel : o.toplevels)
         for (const std::string& builder : toplevel == "flat" || o.blas_builders.empty() ? o.builders : o.blas_builders)
             for (const std::string& kernel : o.kernels)
@@ -169,18 +169,22 @@ std::vector<Entry> make_entries(const Scene& scene, const FlatScene& flat, const
             for (const std::string& kernel : o.kernels)
                 for (const std::string& traversal : o.traversals)
                     for (const std::string& intersector : o.intersectors)
-                        for (const std::string& collapse : o.collapses) {
-                            // A binary layout is the same with every collapse: one row, not a copy of it.
+                        for (const std::string& collapse : o.collapses)
+                        for (const std::string& layout : o.layouts) {
+                            // A binary layout is the same with every collapse: one row, not a copy of it. Compressed
+                            // nodes are bvh8's: other kernels take the standard row only.
                             if (collapse != o.collapses.front() && kernel_width(kernel) == 2) continue;
+                            if (layout == "compressed" && kernel_width(kernel) != 8 && o.layouts.size() > 1) continue;
                             // Another structure family (the kd-tree) has one kernel: one row, not one per BVH kernel,
                             // traversal mode or collapse.
                             const bool bvh = builder == "auto" || is_bvh_builder(builder);
                             if (!bvh && (kernel != o.kernels.front() || traversal != o.traversals.front() ||
-                                         collapse != o.collapses.front()))
+                                         collapse != o.collapses.front() || layout != o.layouts.front()))
                                 continue;
                             CanopyOptions options{builder, optimiser_start(builder, o.start), kernel,
                                                   traversal == "robust", intersector == "watertight", toplevel};
                             options.collapse = parse_collapse_method(collapse);
+                            options.layout = parse_node_layout(layout);
                             if (builder != "auto") {
                                 for (const float threshold : rebraid_thresholds_of(toplevel, o))
                                     for (const SaMax sa_max : sa_max_values_of(builder, o)) {
@@ -611,6 +615,8 @@ nlohmann::json bench_scene(const BenchOptions& o, LoadedScene& loaded, SceneRepo
 }  // namespace
 
 std::vector<nlohmann::json> measure_bench(const std::vector<std::string>& scenes, const BenchOptions& o) {
+    if (std::count(o.layouts.begin(), o.layouts.end(), "compressed") && std::count(o.tracers.begin(), o.tracers.end(), "stream"))
+        throw std::invalid_argument("--layout compressed: the single-ray tracer only, not --tracer stream");
     const auto load = [&](const std::string& scene) -> SceneWork {
         BenchOptions one = o;
         one.scene = scene;

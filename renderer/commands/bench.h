@@ -22,6 +22,7 @@ struct BenchOptions {
     std::vector<std::string> traversals{"robust"};      // robust, fast
     std::vector<std::string> intersectors{"watertight"};  // watertight, moller
     std::vector<std::string> collapses{"optimal"};        // optimal, greedy
+    std::vector<std::string> layouts{"standard"};         // standard, compressed (bvh8)
     std::vector<std::string> embree_qualities;  // empty: no Embree rows
     std::vector<std::string> tracers{"single"};  // single, stream: a row each per accelerator, built once
     uint32_t stream_paths = 1u << 18;            // stream: paths in flight per batch

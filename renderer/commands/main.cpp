@@ -25,6 +25,9 @@ namespace {
 
 using namespace canopy;
 
+constexpr const char* kLayoutHelp =
+    "bvh8 nodes: standard (256 bytes, float planes) or compressed (128 bytes, planes quantised to 8 bits, "
+    "conservatively; single-ray tracer only)";
 constexpr const char* kBatchTraversalHelp =
     "Stream tracer: how canopy traces a sorted batch: packet (16-ray packets, 8 without AVX-512, single rays below "
     "10; the fastest on diffuse rays), single (ray by ray), stream (ray streams)";
@@ -99,6 +102,7 @@ int main(int argc, char** argv) {
     render->add_option("--memory-limit", r.memory_limit, kMemoryLimitHelp)->transform(CLI::AsSizeValue(false));
     render->add_option("--collapse", r.collapse, "Binary tree to bvh4/bvh8: optimal (Ylitie et al. 2017) or greedy (largest area first)")
         ->check(CLI::IsMember({"optimal", "greedy"}))->capture_default_str();
+    render->add_option("--layout", r.layout, kLayoutHelp)->check(CLI::IsMember({"standard", "compressed"}))->capture_default_str();
 
     BenchOptions b;
     std::vector<std::string> accels;
@@ -143,6 +147,8 @@ int main(int argc, char** argv) {
         ->check(CLI::IsMember({"watertight", "moller"}))->capture_default_str();
     bench->add_option("--collapse", b.collapses, "Collapses of the binary tree to bvh4/bvh8: optimal (Ylitie et al. 2017), greedy (largest area first)")
         ->delimiter(',')->check(CLI::IsMember({"optimal", "greedy"}))->capture_default_str();
+    bench->add_option("--layout", b.layouts, std::string(kLayoutHelp) + "; a row each")
+        ->delimiter(',')->check(CLI::IsMember({"standard", "compressed"}))->capture_default_str();
     bench->add_option("--tracer", b.tracers, "Tracers: single (one path at a time), stream (each bounce's rays as one sorted batch)")
         ->delimiter(',')->check(CLI::IsMember({"single", "stream"}))->capture_default_str();
     bench->add_option("--stream-paths", b.stream_paths, "Stream tracer: paths in flight per batch")

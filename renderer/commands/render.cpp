@@ -96,6 +96,9 @@ void prepare_render(RenderOptions& o, PreparedRender& p) {
                           o.frames_planned ? o.frames_planned : o.spp};
     options.planned_frame = frame_settings(o);
     options.collapse = parse_collapse_method(o.collapse);
+    options.layout = parse_node_layout(o.layout);
+    if (options.layout == NodeLayout::Compressed && o.tracer == "stream")
+        throw std::invalid_argument("--layout compressed: the single-ray tracer only, not --tracer stream");
     p.accel = o.accel == "embree" ? make_embree_accelerator(p.flat, o.embree_quality, o.threads)
                                   : make_canopy_accelerator(p.scene, p.flat, options);
     const auto start = std::chrono::steady_clock::now();

@@ -22,6 +22,7 @@ struct RenderOptions {
     std::vector<int> size{1024, 768};
     bool material_albedo = false, heatmap = false;
     std::string traversal = "robust", intersector = "watertight", collapse = "optimal";
+    std::string layout = "standard";     // bvh8 nodes: standard (floats) or compressed (8-bit planes)
     std::string tracer = "single";       // single (one path at a time) or stream (wavefront, sorted ray batches)
     uint32_t stream_paths = 1u << 18;    // stream: paths in flight per batch
     std::string batch_traversal = "packet";  // stream: how batches are traced: single, packet, stream
