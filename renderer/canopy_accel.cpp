@@ -541,6 +541,8 @@ std::unique_ptr<Accelerator> make_canopy_accelerator(const Scene& scene, const F
     check_builder_options(options);
     if (options.builder == "auto") {
         if (options.toplevel != "flat") throw std::invalid_argument("builder 'auto' chooses the top level itself: drop --toplevel");
+        if (options.layout == NodeLayout::Compressed)
+            throw std::invalid_argument("layout 'compressed': not with builder 'auto', whose candidates include two-level trees");
         if (options.frames_planned < 1) throw std::invalid_argument("--frames-planned must be at least 1");
         kernel_width(options.kernel);  // an unknown kernel fails here, not at the first build
         return std::make_unique<AutoAccelerator>(scene, flat, options);

@@ -73,6 +73,23 @@ TEST_CASE("api: a batch answers each ray as the single-ray query does, bit for b
     }
 }
 
+TEST_CASE("api: compressed nodes find the standard layout's hits, at the same distances bit for bit", "[api]") {
+    const canopy::TriangleMesh mesh = canopy::load_triangles("gen:surface?tris=3000&seed=3");
+    const Rays rays = random_rays(5000, 4);
+    const canopy::Accel standard(arrays(mesh), {.builder = "binned", .kernel = "bvh8"});
+    const canopy::Accel compressed(arrays(mesh), {.builder = "binned", .kernel = "bvh8", .layout = "compressed"});
+    const std::vector<canopy::RayHit> expected = batch_hits(standard, rays), actual = batch_hits(compressed, rays);
+    size_t found = 0;
+    for (size_t i = 0; i < rays.count(); ++i) {
+        REQUIRE(std::bit_cast<uint32_t>(actual[i].t) == std::bit_cast<uint32_t>(expected[i].t));
+        REQUIRE(actual[i].found() == expected[i].found());
+        found += actual[i].found();
+    }
+    REQUIRE(found > rays.count() / 4);
+    CHECK(compressed.stats().kernel == "bvh8 compressed");
+    CHECK(compressed.stats().bytes < standard.stats().bytes);
+}
+
 TEST_CASE("api: one thread and all threads give the same tree and hits", "[api]") {
     const canopy::TriangleMesh mesh = canopy::load_triangles("gen:cylinders?tris=4000&seed=2");
     const Rays rays = random_rays(3000, 2);
@@ -176,6 +193,8 @@ TEST_CASE("api: bad input throws std::invalid_argument naming the argument", "[a
     REQUIRE_THROWS_WITH(build(vertices, triangles, {.kernel = "bvh16"}), Contains("kernel: unknown kernel 'bvh16'"));
     REQUIRE_THROWS_WITH(build(vertices, triangles, {.builder = "binned", .toplevel = "x"}), Contains("toplevel: unknown 'x'"));
     REQUIRE_THROWS_WITH(build(vertices, triangles, {.threads = -2}), Contains("threads: -2"));
+    REQUIRE_THROWS_WITH(build(vertices, triangles, {.builder = "binned", .layout = "tiny"}), Contains("layout: unknown layout 'tiny'"));
+    REQUIRE_THROWS_WITH(build(vertices, triangles, {.layout = "compressed"}), Contains("layout: 'compressed' takes a named builder"));
 
     const std::vector<canopy::MeshArrays> meshes{{vertices, triangles}};
     REQUIRE_THROWS_WITH(canopy::Accel(meshes, std::vector<canopy::MeshInstance>{{1}}), Contains("instances[0].mesh: 1 is out of range (1 meshes)"));

@@ -177,6 +177,15 @@ def test_every_input_layout_gives_the_same_hits(scene):
                 assert np.array_equal(got, expected)
 
 
+def test_compressed_nodes_find_the_same_distances(scene):
+    vertices, triangles, origins, directions, _ = scene
+    standard = canopy.Accel(vertices, triangles, builder="binned", kernel="bvh8")
+    compressed = canopy.Accel(vertices, triangles, builder="binned", kernel="bvh8", layout="compressed")
+    t_standard, t_compressed = standard.intersect(origins, directions)[0], compressed.intersect(origins, directions)[0]
+    assert np.array_equal(t_standard, t_compressed)
+    assert compressed.stats()["bytes"] < standard.stats()["bytes"]
+
+
 def test_one_thread_and_all_threads_agree(scene):
     vertices, triangles, origins, directions, _ = scene
     one = canopy.Accel(vertices, triangles, builder="ploc", threads=1).intersect(origins, directions)
@@ -248,6 +257,8 @@ BAD_BUILDS = [
     ({"toplevel": "treetop", "builder": "binned"}, "toplevel: unknown 'treetop'"),
     ({"toplevel": "rebraid"}, "toplevel: builder 'auto' chooses"),
     ({"threads": -1}, "threads: -1"),
+    ({"layout": "tiny", "builder": "binned"}, "layout: unknown layout 'tiny'"),
+    ({"layout": "compressed", "builder": "binned", "kernel": "bvh4"}, "layout: 'compressed' takes a named builder, kernel 'bvh8'"),
     ({"instances": np.zeros((2, 4, 4), np.float32)}, r"instances: shape \(2, 4, 4\), expected \(n, 3, 4\)"),
     ({"instances": np.zeros((0, 3, 4), np.float32)}, "instances: empty"),
     ({"instances": np.zeros((1, 3, 4), np.float32)}, r"instances\[0\].transform: singular"),
