@@ -107,8 +107,6 @@ NodeLayout parse_node_layout(const std::string& name) {
     throw std::invalid_argument("unknown layout '" + name + "' (known: standard, compressed)");
 }
 
-std::string node_layout_name(NodeLayout layout) { return layout == NodeLayout::Compressed ? "compressed" : "standard"; }
-
 template CompressedNode<8> compress_node<8>(const WideNode<8>&);
 template CompressedWideBvh<8> compress<8>(WideBvh<8>&&);
 template WideBvh<8> decompress<8>(const CompressedWideBvh<8>&);

@@ -71,6 +71,5 @@ WideBvh<N> decompress(const CompressedWideBvh<N>& bvh);
 enum class NodeLayout { Standard, Compressed };
 // Throws std::invalid_argument naming the known layouts.
 NodeLayout parse_node_layout(const std::string& name);
-std::string node_layout_name(NodeLayout layout);
 
 }  // namespace canopy

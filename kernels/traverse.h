@@ -1,8 +1,8 @@
 #pragma once
-// Stack-based traversal of a WideBvh<N> or a CompressedWideBvh<N>, one template for every width and layout: children tested in one pass (scalar
-// for N = 2, SSE for N = 4, AVX for N = 8), visited near to far. Robust = true pads the slab distances so
-// rounding never culls a box the ray crosses (see SlabRay); Robust = false is the fast mode. TriangleTest is
-// WatertightRay (default) or MollerTrumboreRay (fast mode). A Counter other than NoCount records inner nodes,
+// Stack-based traversal of a WideBvh<N> or a CompressedWideBvh<N>, one template for every width and layout:
+// children tested in one pass (scalar for N = 2, SSE for N = 4, AVX for N = 8), visited near to far. Robust = true
+// pads the slab distances so rounding never culls a box the ray crosses (see SlabRay); Robust = false is the fast
+// mode. TriangleTest is WatertightRay (default) or MollerTrumboreRay (fast mode). A Counter other than NoCount records inner nodes,
 // leaves and triangles visited; with NoCount the calls compile to nothing.
 #include "accel/compressed_wide_bvh.h"
 #include "accel/wide_bvh.h"
