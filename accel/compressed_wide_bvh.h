@@ -17,7 +17,6 @@ namespace canopy {
 
 template <int N>
 struct alignas(64) CompressedNode {
-    static constexpr uint32_t kEmpty = WideNode<N>::kEmpty;
     float origin[3];  // in the tree's PlaneFrame
     float scale[3];   // powers of two
     // Per child i and axis a, as WideNode::planes: lower plane at q[a * N + i], upper at q[(3 + a) * N + i].
@@ -28,7 +27,6 @@ struct alignas(64) CompressedNode {
 
     float lower(int axis, int i) const { return origin[axis] + float(q[axis * N + i]) * scale[axis]; }
     float upper(int axis, int i) const { return origin[axis] + float(q[(3 + axis) * N + i]) * scale[axis]; }
-    bool is_leaf(int i) const { return count[i] != 0; }
     bool is_empty(int i) const { return !(valid >> i & 1); }
 };
 static_assert(sizeof(CompressedNode<8>) == 128);

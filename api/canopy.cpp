@@ -110,16 +110,14 @@ CanopyOptions engine_options(const AccelOptions& options) {
     if (options.builder == "auto" && options.toplevel != "flat")
         throw std::invalid_argument("toplevel: builder 'auto' chooses the top level itself; leave it 'flat'");
     if (options.threads < 0) throw std::invalid_argument("threads: " + std::to_string(options.threads) + " (0 is all)");
-    const NodeLayout layout = naming("layout", [&] { return parse_node_layout(options.layout); });
-    if (layout == NodeLayout::Compressed && (options.builder == "auto" || kernel_width(options.kernel) != 8 || options.toplevel != "flat"))
-        throw std::invalid_argument("layout: 'compressed' takes a named builder, kernel 'bvh8' and toplevel 'flat'");
     CanopyOptions engine;
-    engine.layout = layout;
+    engine.layout = naming("layout", [&] { return parse_node_layout(options.layout); });
     engine.builder = options.builder;
     engine.kernel = options.kernel;
     engine.robust = options.robust;
     engine.watertight = options.watertight;
     engine.toplevel = options.toplevel;
+    naming("layout", [&] { check_layout_options(engine); });
     return engine;
 }
 

@@ -100,6 +100,9 @@ struct CanopyOptions {
 
 // Throws std::invalid_argument for an unknown builder or kernel, or a two-level top level (it needs the scene).
 std::unique_ptr<Accelerator> make_canopy_accelerator(const FlatScene& scene, const CanopyOptions& options);
+// Throws std::invalid_argument for a layout the options' builder, kernel or top level cannot take (compressed nodes:
+// a named BVH builder, bvh8, flat); both make_canopy_accelerator overloads check it.
+void check_layout_options(const CanopyOptions& options);
 // Any top level: `flat` must be flatten(scene).
 std::unique_ptr<Accelerator> make_canopy_accelerator(const Scene& scene, const FlatScene& flat, const CanopyOptions& options);
 // Builder "kdtree" (renderer/kd_accel.cpp), which make_canopy_accelerator routes there: kernel "kd", flat top

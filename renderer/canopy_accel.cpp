@@ -136,12 +136,6 @@ public:
             find_builder(options.start);
             settings_.start = options.start;
         }
-        if (options.layout == NodeLayout::Compressed) {
-            if (width_ != 8) throw std::invalid_argument("layout 'compressed': kernel bvh8 only, not " + kernel_name(width_));
-            if (options.toplevel != "flat")
-                throw std::invalid_argument("layout 'compressed': flat trees only, not top level '" + options.toplevel + "'");
-            if (!kernel_compiled(8)) throw std::invalid_argument("layout 'compressed' needs the bvh8 kernel, which this build lacks");
-        }
         if (options.toplevel != "flat") {
             if (options.permute_nodes) throw std::invalid_argument("permuted nodes: flat trees only, not top level '" + options.toplevel + "'");
             two_level_settings_.top = parse_top_level(options.toplevel);
@@ -505,6 +499,18 @@ std::unique_ptr<Accelerator> make_family_accelerator(const FlatScene& flat, cons
 
 }  // namespace
 
+void check_layout_options(const CanopyOptions& options) {
+    if (options.layout != NodeLayout::Compressed) return;
+    const auto refuse = [](const std::string& what) {
+        throw std::invalid_argument("compressed nodes take a named BVH builder, kernel bvh8 and a flat top level, not " + what);
+    };
+    // auto's candidates include two-level trees; the other structure families have no wide nodes.
+    const bool family = std::any_of(std::begin(kFamilies), std::end(kFamilies), [&](const FamilyFactory& f) { return options.builder == f.name; });
+    if (options.builder == "auto" || family) refuse("builder '" + options.builder + "'");
+    if (const int width = kernel_width(options.kernel); width != 8) refuse("kernel " + kernel_name(width));
+    if (options.toplevel != "flat") refuse("top level '" + options.toplevel + "'");
+}
+
 TwoLevelInput two_level_input(const Scene& scene) {
     TwoLevelInput input;
     std::vector<std::vector<uint32_t>> object_ids(scene.meshes.size());
@@ -532,6 +538,7 @@ TwoLevelInput two_level_input(const Scene& scene) {
 
 std::unique_ptr<Accelerator> make_canopy_accelerator(const FlatScene& scene, const CanopyOptions& options) {
     check_builder_options(options);
+    check_layout_options(options);
     if (options.builder == "auto") throw std::invalid_argument("builder 'auto' needs the scene's objects and instances");
     if (auto family = make_family_accelerator(scene, options)) return family;
     return std::make_unique<CanopyAccelerator>(nullptr, scene, options);
@@ -539,10 +546,9 @@ std::unique_ptr<Accelerator> make_canopy_accelerator(const FlatScene& scene, con
 
 std::unique_ptr<Accelerator> make_canopy_accelerator(const Scene& scene, const FlatScene& flat, const CanopyOptions& options) {
     check_builder_options(options);
+    check_layout_options(options);
     if (options.builder == "auto") {
         if (options.toplevel != "flat") throw std::invalid_argument("builder 'auto' chooses the top level itself: drop --toplevel");
-        if (options.layout == NodeLayout::Compressed)
-            throw std::invalid_argument("layout 'compressed': not with builder 'auto', whose candidates include two-level trees");
         if (options.frames_planned < 1) throw std::invalid_argument("--frames-planned must be at least 1");
         kernel_width(options.kernel);  // an unknown kernel fails here, not at the first build
         return std::make_unique<AutoAccelerator>(scene, flat, options);

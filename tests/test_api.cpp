@@ -194,7 +194,7 @@ TEST_CASE("api: bad input throws std::invalid_argument naming the argument", "[a
     REQUIRE_THROWS_WITH(build(vertices, triangles, {.builder = "binned", .toplevel = "x"}), Contains("toplevel: unknown 'x'"));
     REQUIRE_THROWS_WITH(build(vertices, triangles, {.threads = -2}), Contains("threads: -2"));
     REQUIRE_THROWS_WITH(build(vertices, triangles, {.builder = "binned", .layout = "tiny"}), Contains("layout: unknown layout 'tiny'"));
-    REQUIRE_THROWS_WITH(build(vertices, triangles, {.layout = "compressed"}), Contains("layout: 'compressed' takes a named builder"));
+    REQUIRE_THROWS_WITH(build(vertices, triangles, {.layout = "compressed"}), Contains("layout: compressed nodes take a named BVH builder, kernel bvh8 and a flat top level, not builder 'auto'"));
 
     const std::vector<canopy::MeshArrays> meshes{{vertices, triangles}};
     REQUIRE_THROWS_WITH(canopy::Accel(meshes, std::vector<canopy::MeshInstance>{{1}}), Contains("instances[0].mesh: 1 is out of range (1 meshes)"));

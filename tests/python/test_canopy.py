@@ -258,7 +258,7 @@ BAD_BUILDS = [
     ({"toplevel": "rebraid"}, "toplevel: builder 'auto' chooses"),
     ({"threads": -1}, "threads: -1"),
     ({"layout": "tiny", "builder": "binned"}, "layout: unknown layout 'tiny'"),
-    ({"layout": "compressed", "builder": "binned", "kernel": "bvh4"}, "layout: 'compressed' takes a named builder, kernel 'bvh8'"),
+    ({"layout": "compressed", "builder": "binned", "kernel": "bvh4"}, "layout: compressed nodes take a named BVH builder, kernel bvh8 and a flat top level, not kernel bvh4"),
     ({"instances": np.zeros((2, 4, 4), np.float32)}, r"instances: shape \(2, 4, 4\), expected \(n, 3, 4\)"),
     ({"instances": np.zeros((0, 3, 4), np.float32)}, "instances: empty"),
     ({"instances": np.zeros((1, 3, 4), np.float32)}, r"instances\[0\].transform: singular"),
