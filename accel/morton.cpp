@@ -22,15 +22,22 @@ uint64_t spread_bits(uint64_t x) {
     return x;
 }
 
-std::vector<uint64_t> morton_codes(const std::vector<PrimRef>& refs) {
-    const BBox centroids = parallel::reduce(
-        refs.size(), kGrain, BBox{},
+// The references' boxes and (doubled) centroids, in one pass.
+struct Extents {
+    BBox boxes, centroids;
+};
+
+std::vector<uint64_t> morton_codes(const std::vector<PrimRef>& refs, BBox& bounds) {
+    const Extents extents = parallel::reduce(
+        refs.size(), kGrain, Extents{},
         [&](size_t begin, size_t end) {
-            BBox b;
-            for (size_t i = begin; i < end; ++i) b.extend(refs[i].center2());
-            return b;
+            Extents e;
+            for (size_t i = begin; i < end; ++i) e.boxes.extend(refs[i].bounds()), e.centroids.extend(refs[i].center2());
+            return e;
         },
-        [](BBox a, const BBox& b) { return merge(a, b); });
+        [](Extents a, const Extents& b) { return Extents{merge(a.boxes, b.boxes), merge(a.centroids, b.centroids)}; });
+    bounds = extents.boxes;
+    const BBox& centroids = extents.centroids;
     const Vec3 extent = centroids.extent();
     Vec3 scale;
     for (int a = 0; a < 3; ++a) scale[a] = extent[a] > 0 ? float((1u << 21) - 1) / extent[a] : 0.0f;
@@ -120,7 +127,7 @@ void radix_sort(std::vector<uint64_t>& codes, std::vector<uint32_t>& order) {
 
 MortonOrder sort_by_morton_code(const std::vector<PrimRef>& refs) {
     MortonOrder sorted;
-    sorted.codes = morton_codes(refs);
+    sorted.codes = morton_codes(refs, sorted.bounds);
     radix_sort(sorted.codes, sorted.order);
     return sorted;
 }

@@ -11,6 +11,7 @@ namespace canopy {
 struct MortonOrder {
     std::vector<uint64_t> codes;  // sorted
     std::vector<uint32_t> order;  // order[i]: the reference with the i-th code; equal codes in index order
+    BBox bounds;                  // of the references' boxes, found in the same pass as the centroids' box
 };
 
 MortonOrder sort_by_morton_code(const std::vector<PrimRef>& refs);

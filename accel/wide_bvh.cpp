@@ -1,7 +1,6 @@
 #include "accel/wide_bvh.h"
 #include "accel/parallel.h"
-
-#include <immintrin.h>
+#include "accel/wide_bvh_writing.h"
 
 #include <algorithm>
 #include <array>
@@ -15,42 +14,14 @@
 namespace canopy {
 namespace {
 
-// What a wide subtree takes of the output arrays: wide nodes (its root included), leaf entries, and leaves.
-struct Extent {
-    uint32_t nodes, entries, leaves;
-
-    Extent& operator+=(const Extent& o) {
-        nodes += o.nodes, entries += o.entries, leaves += o.leaves;
-        return *this;
-    }
-};
-
-// Where a wide subtree's next node slot, leaf entry and leaf go.
-using Cursor = Extent;
+using wide_writing::Cursor;
+using wide_writing::Extent;
+using wide_writing::put_triangle;
+using wide_writing::stream;
+using wide_writing::stream_fence;
 
 // Marks the lanes past a merged subtree's last ref (Collapser::merges).
 constexpr uint32_t kNoRef = 0xffffffffu;
-
-// Copies a leaf block to the leaf array with non-temporal stores, in whole vectors where its size and alignment
-// allow. Such stores are weakly ordered: the thread that made them calls stream_fence() before others may read.
-template <class Block>
-void stream(Block* to, const Block& from) {
-#if defined(__AVX__)
-    if constexpr (sizeof(Block) % 32 == 0 && alignof(Block) >= 32) {
-        for (size_t k = 0; k < sizeof(Block) / 32; ++k)
-            _mm256_stream_si256(reinterpret_cast<__m256i*>(to) + k, _mm256_load_si256(reinterpret_cast<const __m256i*>(&from) + k));
-        return;
-    }
-#endif
-    if constexpr (sizeof(Block) % 16 == 0 && alignof(Block) >= 16) {
-        for (size_t k = 0; k < sizeof(Block) / 16; ++k)
-            _mm_stream_si128(reinterpret_cast<__m128i*>(to) + k, _mm_load_si128(reinterpret_cast<const __m128i*>(&from) + k));
-        return;
-    }
-    *to = from;
-}
-
-inline void stream_fence() { _mm_sfence(); }
 
 // A wide node's children as binary nodes. Greedy (Ganestam and Doggett 2016, sec. 4.2): the binary node's two
 // children, then repeatedly the inner child of largest surface area (the first of equals) replaced by its two
@@ -542,16 +513,6 @@ struct RunList {
     void prefetch(uint32_t) const {}  // leaves are filled later, by the caller
 };
 
-void put_triangle(LeafTriangle& out, uint32_t prim, const Triangle& t) { out = {t.v0, prim, t.v1, t.v2}; }
-
-template <int W>
-void put_triangle(TriangleBlock<W>& block, uint32_t lane, uint32_t prim, const Triangle& t) {
-    const Vec3* vertices[3] = {&t.v0, &t.v1, &t.v2};
-    for (int v = 0; v < 3; ++v)
-        for (int a = 0; a < 3; ++a) block.v[v][a][lane] = (*vertices[v])[a];
-    block.prim[lane] = prim;
-}
-
 // Copies each leaf's triangles into the wide tree as soon as its entries are known. With SIMD blocks the
 // one-triangle leaves of a node share blocks, a lane each (see wide_bvh.h).
 template <int N>
@@ -592,7 +553,7 @@ struct TriangleLeaves {
     // block is assembled aside and then streamed to the leaf array, which traversal reads only later: a plain store
     // would first fetch every line it writes.
     uint32_t gathered(uint32_t entry, const std::array<uint32_t, kLanes>& refs) {
-        static const Leaf empty = empty_block();
+        static const Leaf empty = wide_writing::empty_block<kLanes>();
         Leaf block = empty;
         uint32_t lane = 0;
         for (; lane < kLanes && refs[lane] != kNoRef; ++lane) {
@@ -602,13 +563,6 @@ struct TriangleLeaves {
         stream(&out.leaves[entry], block);
         return lane;
     }
-
-    // Lanes holding no triangle: a degenerate triangle at the origin, never hit.
-    static Leaf empty_block() {
-        Leaf block;
-        for (uint32_t lane = 0; lane < kLanes; ++lane) put_triangle(block, lane, Leaf::kNone, Triangle{Vec3(0), Vec3(0), Vec3(0)});
-        return block;
-    }
 };
 
 }  // namespace
@@ -616,12 +570,20 @@ struct TriangleLeaves {
 CollapseMethod parse_collapse_method(const std::string& name) {
     if (name == "optimal") return CollapseMethod::Optimal;
     if (name == "greedy") return CollapseMethod::Greedy;
-    throw std::invalid_argument("unknown collapse '" + name + "' (known: optimal, greedy)");
+    if (name == "direct") return CollapseMethod::Direct;
+    throw std::invalid_argument("unknown collapse '" + name + "' (known: optimal, greedy, direct)");
+}
+
+// Direct is lbvh's own emission from Morton codes: there is no binary tree it could collapse.
+void check_collapsible(CollapseMethod method) {
+    if (method == CollapseMethod::Direct)
+        throw std::invalid_argument("collapse 'direct' is lbvh's wide tree built from its Morton codes, not a collapse of a binary tree");
 }
 
 template <int N>
 std::vector<LeafRun> collapse_nodes(const Bvh& bvh, WideNodes<N>& nodes, const PlaneFrame& frame,
                                     uint32_t (*entries)(int, uint32_t), uint32_t& total_entries, CollapseMethod method) {
+    check_collapsible(method);
     RunList list;
     total_entries = Collapser<N, RunList>(bvh, nodes, frame, entries, list, method).run().entries;
     return std::move(list.runs);
@@ -630,6 +592,7 @@ std::vector<LeafRun> collapse_nodes(const Bvh& bvh, WideNodes<N>& nodes, const P
 template <int N>
 WideBvh<N> collapse(const Bvh& bvh, std::span<const Triangle> triangles, CollapseMethod method,
                     std::optional<Vec3> origin) {
+    check_collapsible(method);
     WideBvh<N> out;
     if (bvh.nodes.empty()) return out;
     out.bounds = bvh.nodes[0].bounds;

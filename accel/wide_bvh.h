@@ -162,9 +162,12 @@ enum class CollapseMethod {
     // then repeatedly the inner child with the largest surface area is replaced by its two children until there
     // are N.
     Greedy,
+    // No collapse: lbvh's wide tree emitted straight from its sorted Morton codes (build_wide_lbvh,
+    // accel/builders/lbvh_direct.h), for builder lbvh only. collapse() refuses it.
+    Direct,
 };
 
-// "optimal" or "greedy"; otherwise throws std::invalid_argument naming the known methods.
+// "optimal", "greedy" or "direct"; otherwise throws std::invalid_argument naming the known methods.
 CollapseMethod parse_collapse_method(const std::string& name);
 
 // The wide tree of a binary one. A root that is a leaf becomes a node with one leaf child. Its planes are stored

@@ -100,8 +100,9 @@ struct CanopyOptions {
 
 // Throws std::invalid_argument for an unknown builder or kernel, or a two-level top level (it needs the scene).
 std::unique_ptr<Accelerator> make_canopy_accelerator(const FlatScene& scene, const CanopyOptions& options);
-// Throws std::invalid_argument for a layout the options' builder, kernel or top level cannot take (compressed nodes:
-// a named BVH builder, bvh8, flat); both make_canopy_accelerator overloads check it.
+// Throws std::invalid_argument for a layout or collapse the options' builder, kernel or top level cannot take
+// (compressed nodes: a named BVH builder, bvh8, flat; the direct collapse: lbvh, bvh4 or bvh8, flat); both
+// make_canopy_accelerator overloads check it.
 void check_layout_options(const CanopyOptions& options);
 // Any top level: `flat` must be flatten(scene).
 std::unique_ptr<Accelerator> make_canopy_accelerator(const Scene& scene, const FlatScene& flat, const CanopyOptions& options);

@@ -1,4 +1,5 @@
 #include "accel/builder.h"
+#include "accel/builders/lbvh_direct.h"
 #include "accel/kdtree.h"
 #include "accel/metrics.h"
 #include "kernels/dispatch.h"
@@ -75,6 +76,11 @@ using AnyLayout = std::variant<WideBvh<2>, WideBvh<4>, WideBvh<8>, CompressedWid
 template <int N>
 void collapse_into(AnyLayout& layout, const Bvh& bvh, std::span<const Triangle> triangles, CollapseMethod method) {
     if constexpr (kernel_compiled(N)) layout = collapse<N>(bvh, triangles, method);
+}
+
+template <int N>
+void build_wide_lbvh_into(AnyLayout& layout, BuildInput&& input) {
+    if constexpr (kernel_compiled(N) && N > 2) layout = build_wide_lbvh<N>(std::move(input));
 }
 
 template <int N>
@@ -160,11 +166,19 @@ public:
         return top_level_name() + "/" + name;
     }
     std::string kernel() const override {
-        const bool greedy = options_.collapse == CollapseMethod::Greedy && width_ > 2;  // at width 2 both agree
-        return kernel_name(width_) + (options_.layout == NodeLayout::Compressed ? " compressed" : "") + (greedy ? " greedy" : "") +
+        return kernel_name(width_) + (options_.layout == NodeLayout::Compressed ? " compressed" : "") + collapse_suffix() +
                (options_.robust ? "" : " fast") + (options_.watertight ? "" : " mt") + (options_.permute_nodes ? " permuted" : "");
     }
     std::string quality() const override { return ""; }
+    // " greedy" or " direct" for a wide tree not made by the optimal collapse (at width 2 all collapses agree).
+    std::string collapse_suffix() const {
+        if (width_ == 2) return "";
+        switch (options_.collapse) {
+            case CollapseMethod::Greedy: return " greedy";
+            case CollapseMethod::Direct: return " direct";
+            default: return "";
+        }
+    }
     // "@8x" for early split clipping at another SA_max than the automatic one.
     std::string esc_suffix() const {
         return settings_.esc_sa_max == SaMax{} ? "" : "@" + sa_max_name(settings_.esc_sa_max);
@@ -189,7 +203,8 @@ public:
         binary_ = Bvh{};
     }
 
-    // The timed build: the builder's binary BVH and its collapse into the kernel's layout; for a two-level top
+    // The timed build: the builder's binary BVH and its collapse into the kernel's layout, or lbvh's direct wide
+    // tree; for a two-level top
     // level, every object's tree and the top level (object PrimRefs are made inside, and timed).
     void build() override {
         if (two_level_input_) {
@@ -206,11 +221,11 @@ public:
             two_level_built_ = true;
             return;
         }
-        binary_ = builder_.build(BuildInput{scene_.triangles, std::move(refs_)}, settings_);
-        switch (width_) {
-            case 2: collapse_into<2>(layout_, binary_, scene_.triangles, options_.collapse); break;
-            case 4: collapse_into<4>(layout_, binary_, scene_.triangles, options_.collapse); break;
-            default: collapse_into<8>(layout_, binary_, scene_.triangles, options_.collapse); break;
+        if (options_.collapse == CollapseMethod::Direct) {  // no binary tree (check_layout_options: lbvh, bvh4 or bvh8)
+            if (width_ == 4) build_wide_lbvh_into<4>(layout_, BuildInput{scene_.triangles, std::move(refs_)});
+            else build_wide_lbvh_into<8>(layout_, BuildInput{scene_.triangles, std::move(refs_)});
+        } else {
+            build_binary_and_collapse();
         }
         if (options_.permute_nodes)
             std::visit([&]<class Layout>(Layout& bvh) {
@@ -218,6 +233,16 @@ public:
             }, layout_);
         if constexpr (kernel_compiled(8))
             if (options_.layout == NodeLayout::Compressed) layout_ = compress(std::get<WideBvh<8>>(std::move(layout_)));
+    }
+
+    // The builder's binary BVH and its collapse into the kernel's layout.
+    void build_binary_and_collapse() {
+        binary_ = builder_.build(BuildInput{scene_.triangles, std::move(refs_)}, settings_);
+        switch (width_) {
+            case 2: collapse_into<2>(layout_, binary_, scene_.triangles, options_.collapse); break;
+            case 4: collapse_into<4>(layout_, binary_, scene_.triangles, options_.collapse); break;
+            default: collapse_into<8>(layout_, binary_, scene_.triangles, options_.collapse); break;
+        }
     }
 
     // Model of a rigid move: the placement's transform changes, its object tree does not (sec. 6.3 rebuilds
@@ -297,10 +322,12 @@ public:
 
     AcceleratorReport report(bool with_epo) const override {
         if (two_level_input_) return two_level_report();
-        const TreeStats stats = tree_stats(binary_, scene_.triangles.size());
-        AcceleratorReport r{sah_cost(binary_, SahCosts{}), {}, {}, {}, stats.nodes,
-                            stats.leaves, stats.depth, {}, stats.refs_per_triangle};
-        if (with_epo) r.epo = epo_cost(binary_, scene_.triangles);
+        AcceleratorReport r;
+        if (!binary_.nodes.empty()) {  // lbvh's direct wide tree has no binary tree to measure
+            const TreeStats stats = tree_stats(binary_, scene_.triangles.size());
+            r = {sah_cost(binary_, SahCosts{}), {}, {}, {}, stats.nodes, stats.leaves, stats.depth, {}, stats.refs_per_triangle};
+            if (with_epo) r.epo = epo_cost(binary_, scene_.triangles);
+        }
         if (binary_.split.reference_capacity) {
             r.split_ms = binary_.split.split_ms;
             r.ref_capacity_per_tri = double(binary_.split.reference_capacity) / double(scene_.triangles.size());
@@ -500,6 +527,15 @@ std::unique_ptr<Accelerator> make_family_accelerator(const FlatScene& flat, cons
 }  // namespace
 
 void check_layout_options(const CanopyOptions& options) {
+    if (options.collapse == CollapseMethod::Direct) {
+        const auto refuse = [](const std::string& what) {
+            throw std::invalid_argument("collapse 'direct' is lbvh's wide tree from its Morton codes: builder lbvh, kernel bvh4 or bvh8 "
+                                        "and a flat top level, not " + what);
+        };
+        if (options.builder != "lbvh") refuse("builder '" + options.builder + "'");
+        if (const int width = kernel_width(options.kernel); width == 2) refuse("kernel " + kernel_name(width));
+        if (options.toplevel != "flat") refuse("top level '" + options.toplevel + "'");
+    }
     if (options.layout != NodeLayout::Compressed) return;
     const auto refuse = [](const std::string& what) {
         throw std::invalid_argument("compressed nodes take a named BVH builder, kernel bvh8 and a flat top level, not " + what);

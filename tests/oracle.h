@@ -2,6 +2,7 @@
 // Test support: brute-force closest hit over all triangles, random test rays, and the comparison
 // rule of the oracle tests (same triangle, or the same distance within 1e-5 where triangles tie).
 #include "accel/builder.h"
+#include "accel/builders/lbvh_direct.h"
 #include "kernels/dispatch.h"
 #include "kernels/traverse.h"
 #include "scenes/scene.h"
@@ -139,6 +140,7 @@ struct BuiltScene {
     WideBvh<2> bvh2;
     WideBvh<4> bvh4;
     WideBvh<8> bvh8;
+    bool has_bvh2 = true;  // false for lbvh's direct wide trees, which have neither binary tree nor bvh2
 };
 
 inline BuiltScene build_with(const std::string& builder, std::span<const Triangle> tris) {
@@ -147,6 +149,15 @@ inline BuiltScene build_with(const std::string& builder, std::span<const Triangl
     built.bvh2 = collapse<2>(built.binary, tris);
     if constexpr (kernel_compiled(4)) built.bvh4 = collapse<4>(built.binary, tris);
     if constexpr (kernel_compiled(8)) built.bvh8 = collapse<8>(built.binary, tris);
+    return built;
+}
+
+// lbvh's wide trees emitted straight from the Morton codes (collapse 'direct'), in bvh4's and bvh8's places.
+inline BuiltScene build_direct(std::span<const Triangle> tris) {
+    BuiltScene built;
+    built.has_bvh2 = false;
+    if constexpr (kernel_compiled(4)) built.bvh4 = build_wide_lbvh<4>(BuildInput{tris, make_prim_refs(tris)});
+    if constexpr (kernel_compiled(8)) built.bvh8 = build_wide_lbvh<8>(BuildInput{tris, make_prim_refs(tris)});
     return built;
 }
 
@@ -164,22 +175,21 @@ void add_kernel(std::vector<KernelUnderTest>& kernels, const WideBvh<N>& bvh) {
 template <bool Robust = true, class TriangleTest = WatertightRay>
 std::vector<KernelUnderTest> kernels_of(const BuiltScene& built) {
     std::vector<KernelUnderTest> kernels;
-    add_kernel<Robust, TriangleTest>(kernels, built.bvh2);
+    if (built.has_bvh2) add_kernel<Robust, TriangleTest>(kernels, built.bvh2);
     add_kernel<Robust, TriangleTest>(kernels, built.bvh4);
     add_kernel<Robust, TriangleTest>(kernels, built.bvh8);
     return kernels;
 }
 
-// Checks every builder x kernel against the oracle on `rays`: closest hits, and any-hit agreement. At most
-// `allowed` rays may disagree (0 but for the non-conservative fast traversal).
+// Checks every builder x kernel against the oracle on `rays`, and lbvh's direct wide trees with theirs: closest
+// hits, and any-hit agreement. At most `allowed` rays may disagree (0 but for the non-conservative fast traversal).
 template <bool Robust = true, class TriangleTest = WatertightRay>
 void check_against_oracle(std::span<const Triangle> tris, const std::vector<Ray>& rays, const std::string& scene,
                           size_t allowed = 0) {
     const std::vector<Hit> expected = brute_force_all<TriangleTest>(tris, rays);
-    for (const BuilderEntry& builder : builders()) {
-        const BuiltScene built = build_with(builder.name, tris);
+    const auto check = [&](const std::string& name, const BuiltScene& built) {
         for (const KernelUnderTest& kernel : kernels_of<Robust, TriangleTest>(built)) {
-            const std::string what = scene + " / " + builder.name + " / " + kernel.name;
+            const std::string what = scene + " / " + name + " / " + kernel.name;
             std::vector<Hit> actual(rays.size());
             std::vector<char> any(rays.size());
             tbb::parallel_for(size_t(0), rays.size(), [&](size_t i) {
@@ -192,7 +202,9 @@ void check_against_oracle(std::span<const Triangle> tris, const std::vector<Ray>
             INFO(what << ": any-hit disagreements");
             CHECK(any_mismatches <= allowed);
         }
-    }
+    };
+    for (const BuilderEntry& builder : builders()) check(builder.name, build_with(builder.name, tris));
+    check("lbvh direct", build_direct(tris));
 }
 
 }  // namespace canopy::test

@@ -175,6 +175,8 @@ std::vector<Entry> make_entries(const Scene& scene, const FlatScene& flat, const
                             // nodes are bvh8's: other kernels take the standard row only.
                             if (collapse != o.collapses.front() && kernel_width(kernel) == 2) continue;
                             if (layout == "compressed" && kernel_width(kernel) != 8 && o.layouts.size() > 1) continue;
+                            // The direct emission is lbvh's alone, of flat trees: other rows take the other collapses.
+                            if (collapse == "direct" && (builder != "lbvh" || toplevel != "flat") && o.collapses.size() > 1) continue;
                             // Another structure family (the kd-tree) has one kernel: one row, not one per BVH kernel,
                             // traversal mode or collapse.
                             const bool bvh = builder == "auto" || is_bvh_builder(builder);

@@ -32,6 +32,9 @@ constexpr const char* kBatchTraversalHelp =
     "Stream tracer: how canopy traces a sorted batch: packet (16-ray packets, 8 without AVX-512, single rays below "
     "10; the fastest on diffuse rays), single (ray by ray), stream (ray streams)";
 
+constexpr const char* kCollapseHelp =
+    "How bvh4/bvh8 are made from the binary tree: optimal (Ylitie et al. 2017), greedy (largest area first), or, for "
+    "builder lbvh, direct (no binary tree: the wide tree straight from the Morton codes, largest range first)";
 constexpr const char* kMemoryLimitHelp =
     "Refuse scenes whose estimated peak memory (scene, PrimRefs, trees) exceeds these bytes (suffixes k, M, G: "
     "powers of 1024); the bound is otherwise the memory the machine and its cgroup have available";
@@ -100,8 +103,7 @@ int main(int argc, char** argv) {
     render->add_option("--batch-traversal", r.batch_traversal, kBatchTraversalHelp)
         ->check(CLI::IsMember({"single", "packet", "stream"}))->capture_default_str();
     render->add_option("--memory-limit", r.memory_limit, kMemoryLimitHelp)->transform(CLI::AsSizeValue(false));
-    render->add_option("--collapse", r.collapse, "Binary tree to bvh4/bvh8: optimal (Ylitie et al. 2017) or greedy (largest area first)")
-        ->check(CLI::IsMember({"optimal", "greedy"}))->capture_default_str();
+    render->add_option("--collapse", r.collapse, kCollapseHelp)->check(CLI::IsMember({"optimal", "greedy", "direct"}))->capture_default_str();
     render->add_option("--layout", r.layout, kLayoutHelp)->check(CLI::IsMember({"standard", "compressed"}))->capture_default_str();
 
     BenchOptions b;
@@ -145,8 +147,8 @@ int main(int argc, char** argv) {
         ->check(CLI::IsMember({"robust", "fast"}))->capture_default_str();
     bench->add_option("--intersector", b.intersectors, "Intersectors: watertight, moller (Möller–Trumbore)")->delimiter(',')
         ->check(CLI::IsMember({"watertight", "moller"}))->capture_default_str();
-    bench->add_option("--collapse", b.collapses, "Collapses of the binary tree to bvh4/bvh8: optimal (Ylitie et al. 2017), greedy (largest area first)")
-        ->delimiter(',')->check(CLI::IsMember({"optimal", "greedy"}))->capture_default_str();
+    bench->add_option("--collapse", b.collapses, std::string(kCollapseHelp) + "; a row each")
+        ->delimiter(',')->check(CLI::IsMember({"optimal", "greedy", "direct"}))->capture_default_str();
     bench->add_option("--layout", b.layouts, std::string(kLayoutHelp) + "; a row each")
         ->delimiter(',')->check(CLI::IsMember({"standard", "compressed"}))->capture_default_str();
     bench->add_option("--tracer", b.tracers, "Tracers: single (one path at a time), stream (each bounce's rays as one sorted batch)")
