@@ -96,6 +96,7 @@ struct CanopyOptions {
     // rebraid: open BRefs wider than this share of their segment's largest extent (Benthin et al. 2017, sec. 4.2).
     float rebraid_threshold = TwoLevelSettings{}.open_extent;
     SaMax esc_sa_max;  // builder "esc": SA_max of early split clipping (accel/builder.h)
+    float sbvh_alpha = kSbvhAlpha;  // builder "sbvh": its alpha (accel/builder.h)
 };
 
 // Throws std::invalid_argument for an unknown builder or kernel, or a two-level top level (it needs the scene).

@@ -14,6 +14,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <map>
 #include <variant>
@@ -135,6 +136,7 @@ public:
         // crytek-sponza that tree traced faster than one charged per 8 (bvh8 / Embree 1.29 against 1.36, two runs each).
         if (width_ > 2) settings_.leaf_block = 4;
         settings_.esc_sa_max = options.esc_sa_max;
+        settings_.sbvh_alpha = options.sbvh_alpha;
         if (!options.start.empty()) {
             if (!builder_.default_start)
                 throw std::invalid_argument("--start " + options.start + ": builder '" + builder_.name +
@@ -516,6 +518,10 @@ constexpr FamilyFactory kFamilies[] = {{kKdTreeName, &make_kd_accelerator}};
 void check_builder_options(const CanopyOptions& options) {
     if (options.esc_sa_max != SaMax{} && options.builder != "esc")
         throw std::invalid_argument("SA_max " + sa_max_name(options.esc_sa_max) + ": builder 'esc' only, not '" + options.builder + "'");
+    if (options.sbvh_alpha != kSbvhAlpha && options.builder != "sbvh")
+        throw std::invalid_argument("sbvh alpha " + std::to_string(options.sbvh_alpha) + ": builder 'sbvh' only, not '" + options.builder + "'");
+    if (!(options.sbvh_alpha >= 0.0f) || !std::isfinite(options.sbvh_alpha))
+        throw std::invalid_argument("sbvh alpha " + std::to_string(options.sbvh_alpha) + ": a share of the root's area, finite and >= 0");
 }
 
 std::unique_ptr<Accelerator> make_family_accelerator(const FlatScene& flat, const CanopyOptions& options) {

@@ -6,8 +6,10 @@
 #include "accel/builders/presplit.h"
 #include "accel/builders/sbvh.h"
 #include "oracle.h"
+#include "renderer/accelerator.h"
 
 #include <cstring>
+#include <limits>
 #include <random>
 #include <stdexcept>
 
@@ -225,6 +227,37 @@ TEST_CASE("sbvh's memory cap holds on thousands of huge overlapping slivers", "[
     }
     CHECK_THROWS_AS(build_sbvh_with(BuildInput{tris, make_prim_refs(tris)}, {}, SbvhSettings{1e-5f, 0.5f}), std::invalid_argument);
     CHECK_THROWS_AS(build_sbvh_with(BuildInput{tris, make_prim_refs(tris)}, {}, SbvhSettings{-1.0f, 2.0f}), std::invalid_argument);
+}
+
+TEST_CASE("sbvh's alpha: the papers' 1e-5 tries spatial splits where canopy's 1e-3 does not", "[builders][split]") {
+    // Parallel slivers side by side in a unit cube above a floor 100 wide: object splits leave children whose boxes
+    // overlap by about 3e-4 of the root's area, so only the papers' alpha tries the spatial splits that pay there.
+    std::vector<Triangle> tris{{Vec3(-50, -50, -1), Vec3(50, -50, -1), Vec3(50, 50, -1)}, {Vec3(-50, -50, -1), Vec3(50, 50, -1), Vec3(-50, 50, -1)}};
+    std::mt19937 rng(3);
+    std::uniform_real_distribution<float> u(-0.05f, 0.05f);
+    for (int i = 0; i < 500; ++i) {
+        const Vec3 o(u(rng), u(rng), u(rng));
+        tris.push_back({o - Vec3(0.5f), o + Vec3(0.5f), o + Vec3(0.5f + 1e-3f, 0.5f - 1e-3f, 0.5f)});
+    }
+    BuildSettings papers;
+    papers.sbvh_alpha = kPapersSbvhAlpha;
+    const Bvh at_papers = build_sbvh(BuildInput{tris, make_prim_refs(tris)}, papers);
+    const Bvh at_default = build_sbvh(BuildInput{tris, make_prim_refs(tris)}, BuildSettings{});
+    const Bvh no_spatial = build_sbvh_with(BuildInput{tris, make_prim_refs(tris)}, BuildSettings{}, SbvhSettings{1e30f, 2.0f});
+    // (The default splits where the overlap is larger: "sbvh leaves of a triangle cover it" above.)
+    CHECK(at_papers.refs.size() > tris.size());
+    CHECK(at_default.refs.size() == tris.size());
+    CHECK(no_spatial.refs.size() == tris.size());
+    check_leaf_boxes_meet(at_papers, tris);
+    check_leaf_boxes_meet(at_default, tris);
+    // The accelerator takes it for sbvh only, finite and >= 0.
+    FlatScene flat;
+    flat.triangles = tris;
+    for (const auto& [builder, alpha] : {std::pair{"binned", 1e-5f}, std::pair{"sbvh", -1.0f}, std::pair{"sbvh", std::numeric_limits<float>::infinity()}}) {
+        CanopyOptions options{builder, "", "bvh8"};
+        options.sbvh_alpha = alpha;
+        CHECK_THROWS_WITH(make_canopy_accelerator(flat, options), Catch::Contains("sbvh alpha"));
+    }
 }
 
 TEST_CASE("split builders agree with brute force on adversarial input", "[oracle][split]") {

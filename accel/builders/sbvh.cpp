@@ -343,7 +343,9 @@ Bvh build_sbvh_with(BuildInput&& input, const BuildSettings& settings, const Sbv
 }
 
 Bvh build_sbvh(BuildInput&& input, const BuildSettings& settings) {
-    return build_sbvh_with(std::move(input), settings, SbvhSettings{});
+    SbvhSettings sbvh;
+    sbvh.alpha = settings.sbvh_alpha;
+    return build_sbvh_with(std::move(input), settings, sbvh);
 }
 
 }  // namespace canopy

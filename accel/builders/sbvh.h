@@ -5,8 +5,8 @@ namespace canopy {
 
 struct SbvhSettings {
     // Spatial splits are tried only where the best object split's children overlap by more than alpha times the
-    // root's surface area (Stich et al. 2009); 1e-5 as in the quality-metrics paper.
-    float alpha = 1e-5f;
+    // root's surface area (Stich et al. 2009; kSbvhAlpha says why canopy's default is not their 1e-5).
+    float alpha = kSbvhAlpha;
     // Memory cap: at most this many references per triangle in all. Each subtree gets a share of the spare slots
     // in proportion to its references and splits only within it, so the tree does not depend on thread timing;
     // where the share is used up only object splits remain. 2 bounds the reference array at twice binned SAH's,

@@ -57,6 +57,7 @@ struct Entry {
     uint64_t counted_rays = 0;
     std::optional<float> rebraid_threshold;  // canopy's rebraid rows
     std::optional<std::string> esc_sa_max;   // canopy's esc rows
+    std::optional<float> sbvh_alpha;         // canopy's sbvh rows
 
     double build_min() const { return *std::min_element(build_ms.begin(), build_ms.end()); }
     double frame_mean() const { return mean(frame_ms); }
@@ -102,7 +103,7 @@ std::vector<Entry> rows_per_tracer(std::vector<Entry> accelerators, const BenchO
             for (const std::string& batch : tracer == TracerKind::Stream ? ways : std::vector<std::string>{""}) {
                 Entry row;
                 row.accel = a.accel;
-                row.rebraid_threshold = a.rebraid_threshold, row.esc_sa_max = a.esc_sa_max;
+                row.rebraid_threshold = a.rebraid_threshold, row.esc_sa_max = a.esc_sa_max, row.sbvh_alpha = a.sbvh_alpha;
                 row.tracer = tracer;
                 row.batch = ways.size() > 1 ? batch : "";
                 if (canopy && !batch.empty()) row.settings.batch_traversal = parse_batch_traversal(batch);
@@ -191,9 +192,11 @@ std::vector<Entry> make_entries(const Scene& scene, const FlatScene& flat, const
                                 for (const float threshold : rebraid_thresholds_of(toplevel, o))
                                     for (const SaMax sa_max : sa_max_values_of(builder, o)) {
                                         options.rebraid_threshold = threshold, options.esc_sa_max = sa_max;
+                                        if (builder == "sbvh") options.sbvh_alpha = o.sbvh_alpha;
                                         entries.push_back({make_canopy_accelerator(scene, flat, options)});
                                         if (toplevel == "rebraid") entries.back().rebraid_threshold = threshold;
                                         if (builder == "esc") entries.back().esc_sa_max = sa_max_name(sa_max);
+                                        if (builder == "sbvh") entries.back().sbvh_alpha = o.sbvh_alpha;
                                     }
                                 continue;
                             }
@@ -339,6 +342,7 @@ nlohmann::json results_json(const std::vector<Entry>& entries, uint64_t tris) {
                            {"threads", e.threads},
                            {"rebraid_threshold", or_null(e.rebraid_threshold)},
                            {"esc_sa_max", or_null(e.esc_sa_max)},
+                           {"sbvh_alpha", or_null(e.sbvh_alpha)},
                            {"batch_traversal", e.tracer != TracerKind::Stream ? nlohmann::json(nullptr)
                                                : canopy ? nlohmann::json(batch_traversal_name(e.settings.batch_traversal))
                                                : nlohmann::json(e.settings.embree_packets ? "rtcIntersect16" : "rtcIntersect1M")},

@@ -18,6 +18,7 @@ struct BenchOptions {
     std::vector<std::string> toplevels{"flat"};  // flat, two-level, rebraid
     std::vector<float> rebraid_thresholds{TwoLevelSettings().open_extent};  // a rebraid row each (sec. 4.2, Fig. 4)
     std::vector<std::string> esc_sa_max{"auto"};  // builder esc: a row each (parse_sa_max: auto, 12.5, 8x)
+    float sbvh_alpha = kSbvhAlpha;                // builder sbvh's rows
     std::vector<std::string> blas_builders;  // object BVH builders of the two-level rows; empty: `builders`
     std::vector<std::string> traversals{"robust"};      // robust, fast
     std::vector<std::string> intersectors{"watertight"};  // watertight, moller

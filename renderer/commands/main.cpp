@@ -124,6 +124,10 @@ int main(int argc, char** argv) {
                       "esc rows: SA_max of early split clipping, a row each: auto, a box area (12.5) or a multiple of the "
                       "median ideal triangle area (8x)")
         ->delimiter(',')->capture_default_str();
+    CLI::Option* alpha_option = bench->add_option("--sbvh-alpha", b.sbvh_alpha,
+                      "sbvh rows: spatial splits only where object splits overlap by more than this share of the root's "
+                      "area (Stich et al. 2009 and the quality-metrics paper: 1e-5)")
+        ->check(CLI::NonNegativeNumber)->capture_default_str();
     bench->add_option("--blas-builder", b.blas_builders,
                       "Two-level top levels: builders of the object BVHs, a row each (default: the --builder list)")
         ->delimiter(',');
@@ -262,6 +266,9 @@ int main(int argc, char** argv) {
                 if (sa_max_option->count() && std::find(b.builders.begin(), b.builders.end(), "esc") == b.builders.end())
                     throw std::invalid_argument("--esc-sa-max: only with --builder esc");
                 for (const std::string& value : b.esc_sa_max) parse_sa_max(value);
+                const auto builds_sbvh = [](const std::vector<std::string>& names) { return std::find(names.begin(), names.end(), "sbvh") != names.end(); };
+                if (alpha_option->count() && !builds_sbvh(b.builders) && !builds_sbvh(b.blas_builders))
+                    throw std::invalid_argument("--sbvh-alpha: only with --builder sbvh");
             });
             run_bench(bench_scenes, b);
         }

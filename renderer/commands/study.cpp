@@ -341,6 +341,13 @@ nlohmann::json row_json(const Row& r) {
             {"unpermuted_simd_ns_per_ray", r.unpermuted_ns}};
 }
 
+// The study reproduces the quality-metrics paper (Aila, Karras and Laine 2013): its SBVH at the paper's alpha.
+CanopyOptions study_options(const std::string& builder, const std::string& kernel) {
+    CanopyOptions options{builder, "", kernel};
+    if (builder == "sbvh") options.sbvh_alpha = kPapersSbvhAlpha;
+    return options;
+}
+
 // JSON writes a NaN as null: read it back as one.
 double number(const nlohmann::json& j, const char* key) {
     return j.at(key).is_null() ? std::nan("") : j.at(key).get<double>();
@@ -357,7 +364,7 @@ Row row_from_json(const nlohmann::json& j) {
 // Sec. 4.4: the row's builder on the rotated scene, its SIMD tree timed with the rotated rays.
 void measure_rotated(Row& row, const FlatScene& rotated, const std::vector<Ray>& rays, const StudyOptions& o,
                      SceneReport& report) {
-    auto simd = make_canopy_accelerator(rotated, {row.builder, "", "auto"});
+    auto simd = make_canopy_accelerator(rotated, study_options(row.builder, "auto"));
     simd->prepare(), simd->build();
     const AcceleratorReport r = simd->report(true);
     row.rotated_sah = r.sah.value_or(std::nan("")), row.rotated_epo = r.epo.value_or(std::nan(""));
@@ -371,7 +378,7 @@ void measure_rotated(Row& row, const FlatScene& rotated, const std::vector<Ray>&
 // `original`.
 void measure_permuted(Row& row, const Accelerator& original, const FlatScene& flat, const std::vector<Ray>& rays,
                       const StudyOptions& o, SceneReport& report) {
-    CanopyOptions options{row.builder, "", "auto"};
+    CanopyOptions options = study_options(row.builder, "auto");
     options.permute_nodes = o.permute_seed;
     auto permuted = make_canopy_accelerator(flat, options);
     permuted->prepare(), permuted->build();
@@ -397,8 +404,8 @@ SceneResult study_scene(const std::string& scene_name, const Scene& scene, const
     if (o.rotate)
         for (const Ray& ray : rays) rotated_rays.push_back(rotation.ray(ray));
     for (const std::string& name : names) {
-        auto scalar = make_canopy_accelerator(flat, {name, "", "bvh2"});
-        auto simd = make_canopy_accelerator(flat, {name, "", "auto"});
+        auto scalar = make_canopy_accelerator(flat, study_options(name, "bvh2"));
+        auto simd = make_canopy_accelerator(flat, study_options(name, "auto"));
         for (Accelerator* a : {scalar.get(), simd.get()}) a->prepare(), a->build();
         const AcceleratorReport rs = scalar->report(true), rw = simd->report(true);
         const double none = std::nan("");  // what another structure family does not define (EPO, wide layouts)
