@@ -35,7 +35,7 @@ private:
     // Builds the subtree over `range` rooted at slot `node` (slots as SparseTree reserves them).
     void build_subtree(const Range& range, uint32_t node, uint32_t descendants, uint32_t depth) {
         const uint32_t n = range.size();
-        if (n > 1 && depth < kMedianFallbackDepth && spread(range.centroids) > 0.0f) {
+        if (n > 1 && !leaf_always_cheaper(n) && depth < kMedianFallbackDepth && spread(range.centroids) > 0.0f) {
             const BinMapping mapping(range.centroids, object_bin_count(bins_, n));
             const Split split = best_split(bin_refs(refs_.data(), range.begin, range.size(), mapping), mapping.bins, settings_);
             const float area = range.bounds.half_area();
@@ -51,6 +51,13 @@ private:
         } else {
             split_at_median(range, node, descendants, depth);  // coincident centroids, or too deep
         }
+    }
+
+    // Whether a leaf of n references beats every split without binning them: a leaf that one block test covers
+    // costs C_tri A, and a split at least C_inn A plus its children's tests, so the leaf wins (ties go to leaves)
+    // wherever C_inn >= C_tri. Most of a tree's nodes are that small.
+    bool leaf_always_cheaper(uint32_t n) const {
+        return n <= max_leaf_ && settings_.leaf_tests(n) <= 1.0f && settings_.costs.inner >= settings_.costs.triangle;
     }
 
     static float spread(const Box4& b) {
