@@ -30,8 +30,8 @@ std::string sa_max_name(const SaMax& sa_max);  // parse_sa_max's inverse
 
 // SBVH's alpha (Stich et al. 2009), builder "sbvh": spatial splits are tried only where the best object split's
 // children overlap by more than this share of the root's surface area. Stich et al. and the quality-metrics paper
-// use 1e-5; at 1e-3 sbvh bvh8 built crytek-sponza, sibenik and conference in 0.51x, 0.57x and 0.78x the time with
-// frames within 1.5% (docs/results.md), so canopy's default is 1e-3 and the papers' reproductions set 1e-5.
+// use 1e-5; at 1e-3 sbvh bvh8 built crytek-sponza, sibenik and conference in 0.54x, 0.57x and 0.78x the time, its
+// frames as fast (docs/results.md), so canopy's default is 1e-3 and the papers' reproductions set 1e-5.
 constexpr float kSbvhAlpha = 1e-3f;
 constexpr float kPapersSbvhAlpha = 1e-5f;
 
