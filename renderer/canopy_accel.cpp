@@ -209,8 +209,8 @@ public:
     }
 
     // The timed build: the builder's binary BVH and its collapse into the kernel's layout, or lbvh's direct wide
-    // tree; for a two-level top
-    // level, every object's tree and the top level (object PrimRefs are made inside, and timed).
+    // tree; for a two-level top level, every object's tree and the top level (object PrimRefs are made inside, and
+    // timed).
     void build() override {
         if (two_level_input_) {
             TwoLevelTimes times;
