@@ -51,7 +51,8 @@ private:
     static constexpr size_t kParallelRefs = 16 * 1024;
     // Wide levels above the subtrees that are measured and written concurrently: 2^8 or 2^9 subtrees at any width.
     static constexpr uint32_t kTopDepth = 9 / std::bit_width(unsigned(N - 1));
-    // References past the leaf being written (the next leaves', in Morton order) whose PrimRefs are fetched ahead.
+    // References past the leaf being written (the next leaves', in Morton order) whose PrimRefs are fetched ahead:
+    // crytek-sponza's bvh8 built in 10.2 to 10.5 ms with it and 11.7 to 11.9 without (2 threads, three runs each).
     static constexpr uint32_t kPrefetchRefs = 2 * kLanes;
 
     // Index of the top-level node at `depth` reached by child choices `path` (base N digits), in level order.
