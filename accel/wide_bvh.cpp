@@ -252,17 +252,11 @@ public:
 private:
     // Binary trees smaller than this collapse on one thread.
     static constexpr size_t kParallelNodes = 16 * 1024;
-    // Wide levels above the subtrees that are measured and written concurrently: 2^8 or 2^9 subtrees at any width.
-    static constexpr uint32_t kTopDepth = 9 / std::bit_width(unsigned(N - 1));
+    static constexpr uint32_t kTopDepth = wide_writing::kTopDepth<N>;
     // Merged leaves ahead of the one being written whose triangles are fetched.
     static constexpr size_t kPrefetchMerged = 4;
 
-    // Index of the top-level node at `depth` reached by child choices `path` (base N digits), in level order.
-    static uint32_t slot_of(uint32_t depth, uint32_t path) {
-        uint32_t first = 0;
-        for (uint32_t d = 0, level = 1; d < depth; ++d, level *= N) first += level;
-        return first + path;
-    }
+    static constexpr auto slot_of = wide_writing::top_slot<N>;
 
     // The extent of the wide subtree rooted at inner binary node `index` (not merged), reached from the root by
     // `path`.

@@ -5,6 +5,8 @@
 
 #include <immintrin.h>
 
+#include <bit>
+
 namespace canopy::wide_writing {
 
 // What a wide subtree takes of the output arrays: wide nodes (its root included), leaf entries, and leaves.
@@ -19,6 +21,18 @@ struct Extent {
 
 // Where a wide subtree's next node slot, leaf entry and leaf go.
 using Cursor = Extent;
+
+// Wide levels above the subtrees that are measured and written concurrently: 2^8 or 2^9 subtrees at any width.
+template <int N>
+constexpr uint32_t kTopDepth = 9 / std::bit_width(unsigned(N - 1));
+
+// Index of the top-level node at `depth` reached by child choices `path` (base N digits), in level order.
+template <int N>
+uint32_t top_slot(uint32_t depth, uint32_t path) {
+    uint32_t first = 0;
+    for (uint32_t d = 0, level = 1; d < depth; ++d, level *= N) first += level;
+    return first + path;
+}
 
 // Copies a node or leaf block to its array with non-temporal stores, in whole vectors where its size and alignment
 // allow: traversal reads them only later, and a plain store would first fetch every line it writes. Such stores

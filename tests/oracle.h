@@ -72,6 +72,29 @@ inline std::vector<Ray> random_rays(std::span<const Triangle> tris, size_t count
     return rays;
 }
 
+// `tris` a thousand times their extent from the origin along x, then scaled by `scale`: the extremes of the layouts'
+// plane frames and quantisation.
+inline std::vector<Triangle> scaled_far_from_origin(std::vector<Triangle> tris, float scale) {
+    BBox bounds;
+    for (const Triangle& t : tris) bounds.extend(BBox::of(t));
+    const Vec3 offset(1000.0f * glm::length(bounds.extent()), 0.0f, 0.0f);
+    for (Triangle& t : tris)
+        for (Vec3* v : {&t.v0, &t.v1, &t.v2}) *v = scale * (*v + offset);
+    return tris;
+}
+
+// `count` rays aimed at shared corners and edge midpoints, from a few units of `scale` away.
+inline std::vector<Ray> corner_and_edge_rays(std::span<const Triangle> tris, size_t count, float scale) {
+    std::vector<Ray> rays;
+    for (size_t i = 0; i < count; ++i) {
+        const Triangle& t = tris[(i * 7919) % tris.size()];
+        const Vec3 target = i % 2 ? t.v0 : 0.5f * (t.v1 + t.v2);
+        const Vec3 org = target + scale * Vec3(3.0f, 2.0f + float(i % 5), -4.0f);
+        rays.push_back({org, target - org});
+    }
+    return rays;
+}
+
 // random_rays with bounded intervals: every third starts 5% of the scene's diagonal along, every other one ends at
 // 30% of it.
 inline std::vector<Ray> bounded_interval_rays(const FlatScene& flat, size_t count, uint64_t seed) {

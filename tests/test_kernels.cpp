@@ -234,11 +234,8 @@ TEST_CASE("the nearest hit's corners are its scene triangle's, bit for bit", "[k
         INFO(spec);
         const FlatScene flat = flatten(load_scene(spec));
         std::vector<Ray> rays = random_rays(flat.triangles, 4000, 13);
-        for (size_t i = 0; i < 2000; ++i) {  // aimed at corners and edge midpoints, which triangles share: ties
-            const Triangle& t = flat.triangles[(i * 7919) % flat.triangles.size()];
-            const Vec3 target = i % 2 ? t.v0 : 0.5f * (t.v1 + t.v2), org = target + Vec3(3.0f, 2.0f + float(i % 5), -4.0f);
-            rays.push_back({org, target - org});
-        }
+        const std::vector<Ray> corners = corner_and_edge_rays(flat.triangles, 2000, 1.0f);  // shared by triangles: ties
+        rays.insert(rays.end(), corners.begin(), corners.end());
         const BuiltScene built = build_with("binned", flat.triangles);
         check_nearest_corners<2, WatertightRay>(built.bvh2, flat.triangles, rays);
         check_nearest_corners<4, WatertightRay>(built.bvh4, flat.triangles, rays);

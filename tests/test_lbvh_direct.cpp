@@ -148,15 +148,6 @@ std::vector<Triangle> one_centroid(size_t count) {
     return tris;
 }
 
-std::vector<Triangle> scaled_and_moved(std::vector<Triangle> tris, float scale) {
-    BBox bounds;
-    for (const Triangle& t : tris) bounds.extend(BBox::of(t));
-    const Vec3 offset(1000.0f * glm::length(bounds.extent()), 0.0f, 0.0f);
-    for (Triangle& t : tris)
-        for (Vec3* v : {&t.v0, &t.v1, &t.v2}) *v = scale * (*v + offset);
-    return tris;
-}
-
 }  // namespace
 
 TEST_CASE("direct lbvh trees: Morton-ordered leaves of at most a block, full nodes above them", "[builders][direct]") {
@@ -198,14 +189,10 @@ TEST_CASE("direct lbvh trees agree with brute force at scales 1e-12 to 1e12, far
     for (const float scale : {1.0f, 1e-12f, 1e12f})
         for (const char* spec : {"gen:box?tris=3000&seed=4", "gen:cylinders?tris=2000&seed=6"}) {
             const std::string what = std::string(spec) + " scaled by " + std::to_string(scale);
-            const std::vector<Triangle> tris = scaled_and_moved(flatten(load_scene(spec)).triangles, scale);
+            const std::vector<Triangle> tris = scaled_far_from_origin(flatten(load_scene(spec)).triangles, scale);
             std::vector<Ray> rays = random_rays(tris, 3000, 13);
-            for (size_t i = 0; i < 1000; ++i) {  // aimed at shared corners and edges
-                const Triangle& t = tris[(i * 7919) % tris.size()];
-                const Vec3 target = i % 2 ? t.v0 : 0.5f * (t.v1 + t.v2);
-                const Vec3 org = target + scale * Vec3(3.0f, 2.0f + float(i % 5), -4.0f);
-                rays.push_back({org, target - org});
-            }
+            const std::vector<Ray> corners = corner_and_edge_rays(tris, 1000, scale);
+            rays.insert(rays.end(), corners.begin(), corners.end());
             const std::vector<Hit> expected = brute_force_all(tris, rays);
             const BuiltScene direct = build_direct(tris);  // the kernels keep references to its trees
             for (const KernelUnderTest& kernel : kernels_of(direct)) {

@@ -49,18 +49,12 @@ public:
 private:
     // Smaller scenes are built on one thread.
     static constexpr size_t kParallelRefs = 16 * 1024;
-    // Wide levels above the subtrees that are measured and written concurrently: 2^8 or 2^9 subtrees at any width.
-    static constexpr uint32_t kTopDepth = 9 / std::bit_width(unsigned(N - 1));
+    static constexpr uint32_t kTopDepth = wide_writing::kTopDepth<N>;
     // References past the leaf being written (the next leaves', in Morton order) whose PrimRefs are fetched ahead:
     // crytek-sponza's bvh8 built in 10.2 to 10.5 ms with it and 11.7 to 11.9 without (2 threads, three runs each).
     static constexpr uint32_t kPrefetchRefs = 2 * kLanes;
 
-    // Index of the top-level node at `depth` reached by child choices `path` (base N digits), in level order.
-    static uint32_t slot_of(uint32_t depth, uint32_t path) {
-        uint32_t first = 0;
-        for (uint32_t d = 0, level = 1; d < depth; ++d, level *= N) first += level;
-        return first + path;
-    }
+    static constexpr auto slot_of = wide_writing::top_slot<N>;
 
     bool is_leaf(uint32_t size) const { return size <= kLanes; }
 
