@@ -265,6 +265,11 @@ AutoChoice choose_builder(const SceneStatistics& stats, int frames, uint64_t pix
     return choice;
 }
 
+uint32_t next_sample_stride(uint32_t stride, double sample_ms, double min_ms) {
+    const double sized = double(stride) * std::max(sample_ms, 0.0) / (kSampleAim * min_ms);
+    return uint32_t(std::clamp(std::floor(sized), 1.0, std::max(1.0, double(stride / 2))));
+}
+
 std::string explain(const AutoChoice& choice, int frames) {
     std::string out;
     char line[320];

@@ -74,6 +74,12 @@ std::vector<CandidateEstimate> prior_estimates(const SceneStatistics& stats, int
 // The calibration may waste (build losers, trace samples) this share of the best time to image it has measured.
 constexpr double kCalibrationBudget = 0.05;
 
+// A sample of `sample_ms` through one tile in `stride` was too short to time (under `min_ms`): the stride of the
+// next, sized by this one's rate to take kSampleAim times min_ms, at most half of `stride` and at least 1 (the whole
+// frame). Growing by a fixed 4x instead overshot: on a 29 ms frame, samples of 0.9, 3.6 and then 14.5 ms.
+constexpr double kSampleAim = 1.25;
+uint32_t next_sample_stride(uint32_t stride, double sample_ms, double min_ms);
+
 // Chooses a candidate for `frames` frames of `pixels` pixels. Measures first the cheapest build predicted near the
 // least time to image; then, in the order of what each would cost from here (build + frames), every candidate
 // predicted to save more than its build against the best measured frames, and every other whose build and sample

@@ -469,12 +469,15 @@ private:
         // to 1.6x the next ones through the same tree (gen:foliage, esc).
         const auto warm_up = std::chrono::steady_clock::now();
         if (!warmed_up_) trace_sample(camera, stride_ * 2), warmed_up_ = true;
-        for (uint32_t stride = stride_;; stride = std::max(1u, stride / 4)) {
+        for (uint32_t stride = stride_;;) {
             const auto start = std::chrono::steady_clock::now();
             trace_sample(camera, stride);
             const auto end = std::chrono::steady_clock::now();
             const double ms = std::chrono::duration<double, std::milli>(end - start).count();
-            if (ms < min_sample_ms_ && stride > 1) continue;  // too short to time: 4x the tiles
+            if (ms < min_sample_ms_ && stride > 1) {  // too short to time: more tiles, as many as min_sample_ms_ needs
+                stride = next_sample_stride(stride, ms, min_sample_ms_);
+                continue;
+            }
             const double traced = double(traced_pixels(sample_frame_.width, sample_frame_.height, stride));
             return {std::chrono::duration<double, std::milli>(end - warm_up).count(), traced > 0.0 ? ms * pixels / traced : 0.0};
         }
@@ -501,7 +504,7 @@ private:
     FrameSettings sample_frame_;  // the planned frame, traced one path at a time
     uint32_t stride_ = 1;         // the sample traces one tile in stride_
     bool warmed_up_ = false;      // this build's calibration has traced its untimed warm-up
-    double min_sample_ms_ = 0.0;  // a shorter sample is traced again with 4x the tiles
+    double min_sample_ms_ = 0.0;  // a shorter sample is traced again with more tiles (next_sample_stride)
     Image scratch_;               // the samples' radiance, which nothing reads
     AutoChoice choice_;
     std::map<std::string, std::unique_ptr<CanopyAccelerator>> trees_;  // the calibration's trees still wanted

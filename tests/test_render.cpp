@@ -505,6 +505,21 @@ TEST_CASE("auto's explanation lists every candidate and the choice", "[auto]") {
     CHECK(text.find("TTI@16") != std::string::npos);
 }
 
+TEST_CASE("a sample too short to time is traced again with as many tiles as its rate says it needs", "[auto]") {
+    // 0.9 ms through one tile in 32, where 5 ms are needed: 32 x 0.9 / 6.25 = 4.6, so one tile in 4 (about 7 ms).
+    CHECK(next_sample_stride(32, 0.9, 5.0) == 4);
+    // At least twice the tiles, however close the sample came, and never fewer.
+    CHECK(next_sample_stride(32, 4.9, 5.0) == 16);
+    CHECK(next_sample_stride(32, 5.0 * kSampleAim, 5.0) == 16);
+    // A sample that took no time, or a negative clock difference, asks for the whole frame; so does a stride of 1.
+    CHECK(next_sample_stride(128, 0.0, 5.0) == 1);
+    CHECK(next_sample_stride(128, -1.0, 5.0) == 1);
+    CHECK(next_sample_stride(1, 0.1, 5.0) == 1);
+    CHECK(next_sample_stride(2, 0.1, 5.0) == 1);
+    // A rate that needs exactly one tile in 8 gets it.
+    CHECK(next_sample_stride(128, 8.0 * kSampleAim * 5.0 / 128.0, 5.0) == 8);
+}
+
 TEST_CASE("a frame's sample traces the frame's own paths in its tiles, and nothing else", "[auto]") {
     const Scene scene = load_scene("gen:box?tris=2000&seed=3");
     const FlatScene flat = flatten(scene);
