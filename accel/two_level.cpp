@@ -226,19 +226,18 @@ private:
         return bvh_.instances[instance].identity ? box : transform_bounds(instances_[instance].to_world, box);
     }
 
-    void build_segment(Segment s, uint32_t node, uint32_t descendants, bool open, uint32_t depth) {
+    // Returns how far past `descendants` its descendants reach (SparseTree::set_inner).
+    uint32_t build_segment(Segment s, uint32_t node, uint32_t descendants, bool open, uint32_t depth) {
         if (open) open = worth_opening(s);
         if (open) s.end = open_wide_brefs(s);
         const BBox bounds = bounds_of(s);
         if (s.end - s.begin == 1 || triangle_leaf(s, bounds)) return nodes_.set_leaf(node, bounds, s.begin, s.end - s.begin);
         const uint32_t mid = partition(s, depth);
         const auto [left, right] = share_free_space(s, mid);
-        const auto [left_descendants, right_descendants] =
-            nodes_.set_inner(node, bounds, descendants, left.extra_end - left.begin);
-        parallel::fork_join(
-            s.end - s.begin, 64,
-            [&, left = left, ld = left_descendants] { build_segment(left, descendants, ld, open, depth + 1); },
-            [&, right = right, rd = right_descendants] { build_segment(right, descendants + 1, rd, open, depth + 1); });
+        return nodes_.set_inner(
+            node, bounds, descendants, left.extra_end - left.begin, s.end - s.begin, 64,
+            [&, left = left](uint32_t first) { return build_segment(left, descendants, first, open, depth + 1); },
+            [&, right = right](uint32_t first) { return build_segment(right, descendants + 1, first, open, depth + 1); });
     }
 
     // Sec. 4.4: no opening once a segment holds one instance only, or at most 4 BRefs that barely overlap (no

@@ -32,8 +32,9 @@ public:
     }
 
 private:
-    // Builds the subtree over `range` rooted at slot `node` (slots as SparseTree reserves them).
-    void build_subtree(const Range& range, uint32_t node, uint32_t descendants, uint32_t depth) {
+    // Builds the subtree over `range` rooted at slot `node`, its descendants from slot `descendants` on (slots as
+    // SparseTree reserves them); returns how far past `descendants` its descendants reach.
+    uint32_t build_subtree(const Range& range, uint32_t node, uint32_t descendants, uint32_t depth) {
         const uint32_t n = range.size();
         if (n > 1 && !leaf_always_cheaper(n) && depth < kMedianFallbackDepth && spread(range.centroids) > 0.0f) {
             const BinMapping mapping(range.centroids, object_bin_count(bins_, n));
@@ -41,16 +42,10 @@ private:
             const float area = range.bounds.half_area();
             const float split_cost = settings_.costs.inner * area + settings_.costs.triangle * split.cost;
             const bool leaf_is_cheaper = n <= max_leaf_ && settings_.costs.triangle * settings_.leaf_tests(n) * area <= split_cost;
-            if (split.axis >= 0 && !leaf_is_cheaper) {
-                partition(range, mapping, split, node, descendants, depth);
-                return;
-            }
+            if (split.axis >= 0 && !leaf_is_cheaper) return partition(range, mapping, split, node, descendants, depth);
         }
-        if (n <= max_leaf_) {
-            nodes_.set_leaf(node, range.bounds.bbox(), range.begin, n);
-        } else {
-            split_at_median(range, node, descendants, depth);  // coincident centroids, or too deep
-        }
+        if (n <= max_leaf_) return nodes_.set_leaf(node, range.bounds.bbox(), range.begin, n);
+        return split_at_median(range, node, descendants, depth);  // coincident centroids, or too deep
     }
 
     // Whether a leaf of n references beats every split without binning them: a leaf that one block test covers
@@ -67,7 +62,7 @@ private:
     }
 
     // Hoare partition by bin; the children's centroid bounds are gathered on the way.
-    void partition(const Range& range, const BinMapping& mapping, const Split& split, uint32_t node,
+    uint32_t partition(const Range& range, const BinMapping& mapping, const Split& split, uint32_t node,
                    uint32_t descendants, uint32_t depth) {
         PrimRef* refs = refs_.data();
         uint32_t l = range.begin, r = range.end;
@@ -82,13 +77,13 @@ private:
             left_centroids.extend(center2(refs[l++]));
             right_centroids.extend(center2(refs[--r]));
         }
-        emit_children({range.begin, l, split.left, left_centroids}, {l, range.end, split.right, right_centroids},
+        return emit_children({range.begin, l, split.left, left_centroids}, {l, range.end, split.right, right_centroids},
                       range, node, descendants, depth);
     }
 
-    void split_at_median(const Range& range, uint32_t node, uint32_t descendants, uint32_t depth) {
+    uint32_t split_at_median(const Range& range, uint32_t node, uint32_t descendants, uint32_t depth) {
         const uint32_t mid = range.begin + range.size() / 2;
-        emit_children(bounds_of(range.begin, mid), bounds_of(mid, range.end), range, node, descendants, depth);
+        return emit_children(bounds_of(range.begin, mid), bounds_of(mid, range.end), range, node, descendants, depth);
     }
 
     Range bounds_of(uint32_t begin, uint32_t end) const {
@@ -100,14 +95,12 @@ private:
         return r;
     }
 
-    void emit_children(const Range& left, const Range& right, const Range& parent, uint32_t node,
-                       uint32_t descendants, uint32_t depth) {
-        const auto [left_descendants, right_descendants] =
-            nodes_.set_inner(node, parent.bounds.bbox(), descendants, left.size());
-        parallel::fork_join(
-            parent.size(), kParallelSubtreeGrain,
-            [&] { build_subtree(left, descendants, left_descendants, depth + 1); },
-            [&] { build_subtree(right, descendants + 1, right_descendants, depth + 1); });
+    uint32_t emit_children(const Range& left, const Range& right, const Range& parent, uint32_t node,
+                           uint32_t descendants, uint32_t depth) {
+        return nodes_.set_inner(
+            node, parent.bounds.bbox(), descendants, left.size(), parent.size(), kParallelSubtreeGrain,
+            [&](uint32_t first) { return build_subtree(left, descendants, first, depth + 1); },
+            [&](uint32_t first) { return build_subtree(right, descendants + 1, first, depth + 1); });
     }
 
     std::vector<PrimRef>& refs_;

@@ -8,6 +8,7 @@
 
 #include <array>
 #include <cmath>
+#include <optional>
 #include <stdexcept>
 #include <string>
 
@@ -127,7 +128,8 @@ private:
         return parallel::reduce(e.count, kParallelBinningGrain, none, chunk, join);
     }
 
-    void build_subtree(const Extent& e, uint32_t node, uint32_t descendants, uint32_t depth) {
+    // Returns how far past `descendants` its descendants reach (SparseTree::set_inner).
+    uint32_t build_subtree(const Extent& e, uint32_t node, uint32_t descendants, uint32_t depth) {
         const NodeInfo info = info_of(e);
         const BBox bounds = info.bounds.bbox();
         const uint32_t n = e.count;
@@ -146,19 +148,15 @@ private:
             const float split_cost = settings_.costs.inner * area + settings_.costs.triangle * best.cost;
             const bool leaf_is_cheaper = n <= max_leaf_ && settings_.costs.triangle * settings_.leaf_tests(n) * area <= split_cost;
             if (best.axis >= 0 && !leaf_is_cheaper) {
-                if (use_spatial && split_spatially(e, spatial, bounds, node, descendants, depth)) return;
-                if (object.axis >= 0) {
-                    split_by_objects(e, object, mapping, bounds, node, descendants, depth);
-                    return;
+                if (use_spatial) {
+                    if (const auto used = split_spatially(e, spatial, bounds, node, descendants, depth)) return *used;
                 }
+                if (object.axis >= 0) return split_by_objects(e, object, mapping, bounds, node, descendants, depth);
             }
         }
-        if (n <= max_leaf_) {
-            nodes_.set_leaf(node, bounds, e.begin, n);
-        } else {
-            const uint32_t half = n / 2;  // coincident centroids, or too deep
-            emit_children(e, half, n - half, true, bounds, node, descendants, depth);
-        }
+        if (n <= max_leaf_) return nodes_.set_leaf(node, bounds, e.begin, n);
+        const uint32_t half = n / 2;  // coincident centroids, or too deep
+        return emit_children(e, half, n - half, true, bounds, node, descendants, depth);
     }
 
     // Binned SAH over the references' centroids, as the binned builder does (accel/sah_binning.h).
@@ -223,13 +221,13 @@ private:
         return best;
     }
 
-    void split_by_objects(const Extent& e, const Candidate& split, const sah_binning::BinMapping& mapping, const BBox& bounds, uint32_t node,
-                          uint32_t descendants, uint32_t depth) {
+    uint32_t split_by_objects(const Extent& e, const Candidate& split, const sah_binning::BinMapping& mapping, const BBox& bounds, uint32_t node,
+                              uint32_t descendants, uint32_t depth) {
         PrimRef* first = refs_.data() + e.begin;
         const sah_binning::BinMapping::Plane plane = mapping.plane(split.axis, split.plane);
         PrimRef* middle = std::partition(first, first + e.count, [&](const PrimRef& r) { return plane.left_of(r); });
         const auto left = uint32_t(middle - first);
-        emit_children(e, left, e.count - left, true, bounds, node, descendants, depth);
+        return emit_children(e, left, e.count - left, true, bounds, node, descendants, depth);
     }
 
     enum class Side : uint8_t { left, right, both };
@@ -247,8 +245,9 @@ private:
     }
 
     // Partitions into [left only | straddling | right only], clips or places the straddling references and lays
-    // the two sides out in their extents. Returns false (refs only permuted) when a side would come out empty.
-    bool split_spatially(const Extent& e, const Candidate& split, const BBox& bounds, uint32_t node,
+    // the two sides out in their extents. Returns the descendant slots used, or nothing (refs only permuted) when a
+    // side would come out empty.
+    std::optional<uint32_t> split_spatially(const Extent& e, const Candidate& split, const BBox& bounds, uint32_t node,
                          uint32_t descendants, uint32_t depth) {
         const AxisBins map(bounds.lower[split.axis], bounds.upper[split.axis], spatial_bins(e.count));
         const float position = map.plane(split.plane);
@@ -272,14 +271,13 @@ private:
         const auto left_count = uint32_t((straddling - first) + to_left.size());
         const auto right_only_count = uint32_t(end - right_only);
         const auto right_count = uint32_t(right_only_count + to_right.size());
-        if (left_count == 0 || right_count == 0 || left_count + right_count > e.capacity) return false;
+        if (left_count == 0 || right_count == 0 || left_count + right_count > e.capacity) return std::nullopt;
 
         const uint32_t right_begin = e.begin + left_count + left_share(e, left_count, right_count);
         std::move_backward(right_only, end, refs_.data() + right_begin + right_count);
         std::copy(to_right.begin(), to_right.end(), refs_.data() + right_begin);
         std::copy(to_left.begin(), to_left.end(), straddling);
-        emit_children(e, left_count, right_count, false, bounds, node, descendants, depth);
-        return true;
+        return emit_children(e, left_count, right_count, false, bounds, node, descendants, depth);
     }
 
     // The spare slots a subtree hands on, split in proportion to the children's references.
@@ -290,8 +288,8 @@ private:
 
     // Children: the left side's references at e.begin, the right side's at the start of its extent, where
     // they are moved when they still follow the left side's.
-    void emit_children(const Extent& e, uint32_t left, uint32_t right, bool right_follows_left, const BBox& bounds,
-                       uint32_t node, uint32_t descendants, uint32_t depth) {
+    uint32_t emit_children(const Extent& e, uint32_t left, uint32_t right, bool right_follows_left, const BBox& bounds,
+                           uint32_t node, uint32_t descendants, uint32_t depth) {
         const uint32_t left_capacity = left + left_share(e, left, right);
         const Extent le{e.begin, left, left_capacity};
         const Extent re{e.begin + left_capacity, right, e.capacity - left_capacity};
@@ -300,11 +298,9 @@ private:
             std::move_backward(from, from + right, refs_.data() + re.begin + right);
         }
         // A subtree over an extent of c slots has at most c leaves, so 2c - 2 descendant slots suffice.
-        const auto [left_descendants, right_descendants] = nodes_.set_inner(node, bounds, descendants, le.capacity);
-        parallel::fork_join(
-            e.count, kParallelSubtreeGrain,
-            [&] { build_subtree(le, descendants, left_descendants, depth + 1); },
-            [&] { build_subtree(re, descendants + 1, right_descendants, depth + 1); });
+        return nodes_.set_inner(node, bounds, descendants, le.capacity, e.count, kParallelSubtreeGrain,
+                                [&](uint32_t first) { return build_subtree(le, descendants, first, depth + 1); },
+                                [&](uint32_t first) { return build_subtree(re, descendants + 1, first, depth + 1); });
     }
 
     std::span<const Triangle> triangles_;

@@ -99,8 +99,9 @@ private:
         return best;
     }
 
-    void build_subtree(uint32_t begin, uint32_t end, const BBox& bounds, uint32_t node, uint32_t descendants,
-                       uint32_t depth) {
+    // Returns how far past `descendants` its descendants reach (SparseTree::set_inner).
+    uint32_t build_subtree(uint32_t begin, uint32_t end, const BBox& bounds, uint32_t node, uint32_t descendants,
+                           uint32_t depth) {
         const uint32_t n = end - begin;
         if (n == 1) return nodes_.set_leaf(node, bounds, begin, n);
         Split split;
@@ -116,17 +117,11 @@ private:
         // Too deep, or no finite cost (box areas that overflow float, scenes beyond about 1e19): cut at the median.
         if (split.axis < 0) split = {bounds.largest_axis(), begin + n / 2, 0.0f};
         partition(begin, end, split);
-        const auto [left_descendants, right_descendants] =
-            nodes_.set_inner(node, bounds, descendants, split.position - begin);
         const BBox left = bounds_of(begin, split.position), right = bounds_of(split.position, end);
-        parallel::fork_join(
-            n, kParallelSubtreeGrain,
-            [&, left_descendants = left_descendants] {
-                build_subtree(begin, split.position, left, descendants, left_descendants, depth + 1);
-            },
-            [&, right_descendants = right_descendants] {
-                build_subtree(split.position, end, right, descendants + 1, right_descendants, depth + 1);
-            });
+        return nodes_.set_inner(
+            node, bounds, descendants, split.position - begin, n, kParallelSubtreeGrain,
+            [&](uint32_t first) { return build_subtree(begin, split.position, left, descendants, first, depth + 1); },
+            [&](uint32_t first) { return build_subtree(split.position, end, right, descendants + 1, first, depth + 1); });
     }
 
     // Splits [begin, end) of every order at the split: the other two orders are partitioned stably by which
