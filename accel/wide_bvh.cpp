@@ -413,13 +413,15 @@ private:
         std::vector<uint32_t> slots{self};
         for (size_t r = 0; r < records.size(); ++r) {
             // Fetch ahead what write_node reads at random: binary children two records on, and the leaf
-            // contents (triangles) of the next record, whose children are in cache by now.
+            // contents (every triangle, not only each leaf's first: binned bvh8 collapses of crytek-sponza took
+            // 6.2 ms instead of 8.1 on one thread) of the next record, whose children are in cache by now.
             if (r + 2 < records.size())
                 for (int i = 0; i < records[r + 2].count; ++i) __builtin_prefetch(&bvh_.nodes[records[r + 2].node[i]]);
             if (r + 1 < records.size())
                 for (int i = 0; i < records[r + 1].count; ++i) {
                     const BvhNode& c = bvh_.nodes[records[r + 1].node[i]];
-                    if (c.is_leaf()) sink_.prefetch(c.index);
+                    if (c.is_leaf())
+                        for (uint32_t k = 0; k < c.count; ++k) sink_.prefetch(c.index + k);
                 }
             const WideChildren<N>& children = records[r];
             const int merged_here = std::popcount(children.merged);
@@ -520,9 +522,9 @@ struct TriangleLeaves {
 
     void reserve(const Extent& total) { out.leaves.resize(total.entries); }
 
-    // The first triangle of a leaf (both cache lines it may span).
-    void prefetch(uint32_t first_ref) const {
-        const char* t = reinterpret_cast<const char*>(&triangles[bvh.refs[first_ref]]);
+    // The triangle of one ref (both cache lines it may span).
+    void prefetch(uint32_t ref) const {
+        const char* t = reinterpret_cast<const char*>(&triangles[bvh.refs[ref]]);
         __builtin_prefetch(t);
         __builtin_prefetch(t + sizeof(Triangle) - 1);
     }
