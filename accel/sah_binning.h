@@ -115,17 +115,33 @@ struct BinGrid {
     }
 };
 
-inline void add_to_bins(BinGrid& grid, const PrimRef& r, const BinMapping& mapping) {
-    alignas(16) int32_t b[4];
-    const __m256 ref = _mm256_load_ps(&r.lower.x);
-    const __m128 c2 = _mm_add_ps(_mm256_castps256_ps128(ref), _mm256_extractf128_ps(ref, 1));
-    _mm_store_si128(reinterpret_cast<__m128i*>(b), mapping.bin3(c2));
-    const Box8 box = Box8::of(ref);
-    for (int a = 0; a < 3; ++a) {
-        grid.boxes[a][b[a]].extend(box);
-        ++grid.counts[a][b[a]];
+// The bins of up to kBatch consecutive refs on each axis, and their boxes as Box8.
+struct BinnedBatch {
+    static constexpr size_t kBatch = 16;
+    alignas(16) int32_t bins[kBatch][4];
+    Box8 boxes[kBatch];
+    size_t count;
+
+    BinnedBatch(const PrimRef* refs, size_t n, const BinMapping& mapping) : count(std::min(n, kBatch)) {
+        for (size_t k = 0; k < count; ++k) {
+            const __m256 ref = _mm256_load_ps(&refs[k].lower.x);
+            const __m128 c2 = _mm_add_ps(_mm256_castps256_ps128(ref), _mm256_extractf128_ps(ref, 1));
+            _mm_store_si128(reinterpret_cast<__m128i*>(bins[k]), mapping.bin3(c2));
+            boxes[k] = Box8::of(ref);
+        }
     }
-}
+    // Ref k into grids[k % G].
+    template <size_t G>
+    void add_to(BinGrid* const (&grids)[G]) const {
+        for (size_t k = 0; k < count; ++k) {
+            BinGrid& grid = *grids[k % G];
+            for (int a = 0; a < 3; ++a) {
+                grid.boxes[a][bins[k][a]].extend(boxes[k]);
+                ++grid.counts[a][bins[k][a]];
+            }
+        }
+    }
+};
 
 inline void merge_bins(BinGrid& x, const BinGrid& y, uint32_t n) {
     for (int a = 0; a < 3; ++a) {
@@ -136,24 +152,29 @@ inline void merge_bins(BinGrid& x, const BinGrid& y, uint32_t n) {
     }
 }
 
-// Bins refs [begin, begin + count) by centroid on all three axes in one pass: the pass is memory bound. Even and
-// odd refs go to two grids, merged at the end: neighbouring refs often share a bin, and with one grid each would
-// wait for the previous one's store to that bin to be forwarded.
+// Refs [begin, end), batch by batch, ref k of a batch into grids[k % G].
+template <size_t G>
+void bin_batches(const PrimRef* refs, size_t begin, size_t end, const BinMapping& mapping, BinGrid* const (&grids)[G]) {
+    for (size_t i = begin; i < end; i += BinnedBatch::kBatch) BinnedBatch(refs + i, end - i, mapping).add_to(grids);
+}
+
+// Bins refs [begin, begin + count) by centroid on all three axes in one pass. Refs go in batches: a batch's bins are
+// all computed before any is updated, so that its refs' loads do not wait behind stores to bins whose addresses come
+// late (binning crytek-sponza in chunks of 4096 refs took 5.3 ns a ref instead of 8.6 with a batch of 16; 6.8 with 8).
+// Even and odd refs go to two grids, merged at the end: neighbouring refs often share a bin, and with one grid each
+// would wait for the previous one's store to that bin to be forwarded.
 inline BinGrid bin_refs(const PrimRef* refs, uint32_t begin, uint32_t count, const BinMapping& mapping) {
     const uint32_t n = mapping.bins;
     auto bin_chunk = [&](size_t first, size_t end) {
         BinGrid even(n);
         if (end - first < kTwoGridsFrom) {
-            for (size_t i = begin + first; i < begin + end; ++i) add_to_bins(even, refs[i], mapping);
+            BinGrid* const one[] = {&even};
+            bin_batches(refs, begin + first, begin + end, mapping, one);
             return even;
         }
         BinGrid odd(n);
-        size_t i = begin + first;
-        for (; i + 1 < begin + end; i += 2) {
-            add_to_bins(even, refs[i], mapping);
-            add_to_bins(odd, refs[i + 1], mapping);
-        }
-        if (i < begin + end) add_to_bins(even, refs[i], mapping);
+        BinGrid* const two[] = {&even, &odd};
+        bin_batches(refs, begin + first, begin + end, mapping, two);
         merge_bins(even, odd, n);
         return even;
     };
