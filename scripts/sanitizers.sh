@@ -5,8 +5,9 @@
 #         without UBSan, which nearly doubled their compile time);
 #   tsan: the tests of the parallel code, built by the tsan preset (ThreadSanitizer) against a oneTBB built with
 #         ThreadSanitizer (Debian's libtbb is not, so TSan would miss the synchronisation inside it and report
-#         every task hand-over as a race): the parallel builders' 1-and-2-thread determinism, split partitioning,
-#         the two-level and re-braided builds, the stream tracer and its batch traversals. tests/tsan.supp
+#         every task hand-over as a race): the parallel builders' 1-and-2-thread determinism, the sparse node
+#         storage they share, split partitioning, the two-level and re-braided builds, the stream tracer and its
+#         batch traversals. tests/tsan.supp
 #         suppresses only reports through Debian's Embree, which is not instrumented either.
 # Both presets set CANOPY_TEST_SCALE=0.1 (tests/test_scale.h): the oracle and determinism tests run on a tenth
 # of their rays and triangles. Every sanitizer report fails its test.
@@ -17,7 +18,7 @@ cd "$(dirname "$0")/.."
 export ASAN_OPTIONS=detect_leaks=1:abort_on_error=1
 export UBSAN_OPTIONS=halt_on_error=1:print_stacktrace=1
 export TSAN_OPTIONS="halt_on_error=1:second_deadlock_stack=1:suppressions=$PWD/tests/tsan.supp"
-readonly tsan_tests='1 and 2 threads|split partitioning|two-level|re-braid|top level|stream|batch|packet|wavefront|tracer'
+readonly tsan_tests='1 and 2 threads|sparse tree|split partitioning|two-level|re-braid|top level|stream|batch|packet|wavefront|tracer'
 
 # oneTBB 2021.8.0, the version of Debian 12's libtbb-dev, from Debian's archive (the checksum is the .dsc's),
 # built with -fsanitize=thread into build-tsan/_deps/onetbb-tsan, where the tsan preset's CMAKE_PREFIX_PATH finds
