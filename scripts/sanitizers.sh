@@ -7,8 +7,8 @@
 #         ThreadSanitizer (Debian's libtbb is not, so TSan would miss the synchronisation inside it and report
 #         every task hand-over as a race): the parallel builders' 1-and-2-thread determinism, the sparse node
 #         storage they share, split partitioning, the two-level and re-braided builds, the stream tracer and its
-#         batch traversals. tests/tsan.supp
-#         suppresses only reports through Debian's Embree, which is not instrumented either.
+#         batch traversals. tests/tsan.supp suppresses only reports through Debian's Embree, which is not
+#         instrumented either.
 # Both presets set CANOPY_TEST_SCALE=0.1 (tests/test_scale.h): the oracle and determinism tests run on a tenth
 # of their rays and triangles. Every sanitizer report fails its test.
 # Usage: scripts/sanitizers.sh [asan|tsan ...]   (default: asan, asan tsan in .ci/run)
