@@ -63,7 +63,7 @@ private:
 
     // Hoare partition by bin; the children's centroid bounds are gathered on the way.
     uint32_t partition(const Range& range, const BinMapping& mapping, const Split& split, uint32_t node,
-                   uint32_t descendants, uint32_t depth) {
+                       uint32_t descendants, uint32_t depth) {
         PrimRef* refs = refs_.data();
         uint32_t l = range.begin, r = range.end;
         Box4 left_centroids = Box4::empty(), right_centroids = Box4::empty();
@@ -78,7 +78,7 @@ private:
             right_centroids.extend(center2(refs[--r]));
         }
         return emit_children({range.begin, l, split.left, left_centroids}, {l, range.end, split.right, right_centroids},
-                      range, node, descendants, depth);
+                             range, node, descendants, depth);
     }
 
     uint32_t split_at_median(const Range& range, uint32_t node, uint32_t descendants, uint32_t depth) {

@@ -245,10 +245,10 @@ private:
     }
 
     // Partitions into [left only | straddling | right only], clips or places the straddling references and lays
-    // the two sides out in their extents. Returns the descendant slots used, or nothing (refs only permuted) when a
-    // side would come out empty.
+    // the two sides out in their extents. Returns how far past `descendants` its descendants reach, or nothing (refs
+    // only permuted) when a side would come out empty.
     std::optional<uint32_t> split_spatially(const Extent& e, const Candidate& split, const BBox& bounds, uint32_t node,
-                         uint32_t descendants, uint32_t depth) {
+                                            uint32_t descendants, uint32_t depth) {
         const AxisBins map(bounds.lower[split.axis], bounds.upper[split.axis], spatial_bins(e.count));
         const float position = map.plane(split.plane);
         PrimRef* first = refs_.data() + e.begin;
