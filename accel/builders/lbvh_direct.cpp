@@ -176,7 +176,14 @@ private:
     // The block of sorted references [begin, end), a lane each in order; returns their box.
     BBox write_leaf(uint32_t begin, uint32_t end, uint32_t entry) {
         static const Leaf empty = wide_writing::empty_block<kLanes>();
-        for (uint32_t i = end; i < std::min(end + kPrefetchRefs, uint32_t(refs_.size())); ++i) __builtin_prefetch(&refs_[order_[i]]);
+        const uint32_t n = uint32_t(refs_.size());
+        for (uint32_t i = end; i < std::min(end + kPrefetchRefs, n); ++i) __builtin_prefetch(&refs_[order_[i]]);
+        // The next leaf's triangles, through its refs, which the previous leaf fetched.
+        for (uint32_t i = end; i < std::min(end + kLanes, n); ++i) {
+            const char* triangle = reinterpret_cast<const char*>(&triangles_[refs_[order_[i]].prim]);
+            __builtin_prefetch(triangle);
+            __builtin_prefetch(triangle + sizeof(Triangle) - 1);
+        }
         Leaf block = empty;
         BBox box;
         for (uint32_t i = begin; i < end; ++i) {
