@@ -124,24 +124,6 @@ std::string optimiser_start(const std::string& builder, const std::string& start
     return is_bvh_builder(builder) && find_builder(builder).default_start ? start : "";
 }
 
-// Every row keeps its accelerator from its build to the report: the memory to plan for is all of them. Rows
-// that differ only by traversal mode, intersector or collapse are separate builds of the same size.
-std::vector<BuildPlan> build_plans(const BenchOptions& o) {
-    std::vector<BuildPlan> plans;
-    const size_t copies = o.traversals.size() * o.intersectors.size() * o.collapses.size() * o.layouts.size();
-    for (const std::string& toplevel : o.toplevels)
-        for (const std::string& builder : toplevel == "flat" || o.blas_builders.empty() ? o.builders : o.blas_builders)
-            for (const std::string& kernel : o.kernels)
-                plans.insert(plans.end(), copies * o.frames_planned.size() * (builder == "esc" ? o.esc_sa_max.size() : 1),
-                             {builder, kernel_width(kernel), toplevel != "flat"});
-    const bool two_level = std::any_of(o.toplevels.begin(), o.toplevels.end(), [](const std::string& t) { return t != "flat"; });
-    for (size_t q = 0; q < o.embree_qualities.size(); ++q) {
-        plans.push_back({"embree", 8, false});
-        if (two_level) plans.push_back({"embree", 8, true});
-    }
-    return plans;
-}
-
 // "2 threads", "1 thread" or "all threads" (0).
 std::string threads_text(int threads) {
     if (threads == 0) return "all threads";
@@ -619,6 +601,29 @@ nlohmann::json bench_scene(const BenchOptions& o, LoadedScene& loaded, SceneRepo
 }
 
 }  // namespace
+
+// Row by row as make_entries makes them. Rows that differ only by traversal mode, intersector or collapse are
+// separate builds of the same size; auto has a row per planned frame count (under the first top level only, as it
+// chooses its own), rebraid one per opening threshold and esc one per SA_max.
+std::vector<BuildPlan> build_plans(const BenchOptions& o) {
+    std::vector<BuildPlan> plans;
+    const size_t copies = o.traversals.size() * o.intersectors.size() * o.collapses.size() * o.layouts.size();
+    for (const std::string& toplevel : o.toplevels)
+        for (const std::string& builder : toplevel == "flat" || o.blas_builders.empty() ? o.builders : o.blas_builders)
+            for (const std::string& kernel : o.kernels) {
+                const bool auto_rows = builder == "auto";
+                if (auto_rows && toplevel != o.toplevels.front()) continue;
+                const size_t rows = copies * (auto_rows ? o.frames_planned.size()
+                                                        : rebraid_thresholds_of(toplevel, o).size() * sa_max_values_of(builder, o).size());
+                plans.insert(plans.end(), rows, {builder, kernel_width(kernel), !auto_rows && toplevel != "flat"});
+            }
+    const bool two_level = std::any_of(o.toplevels.begin(), o.toplevels.end(), [](const std::string& t) { return t != "flat"; });
+    for (size_t q = 0; q < o.embree_qualities.size(); ++q) {
+        plans.push_back({"embree", 8, false});
+        if (two_level) plans.push_back({"embree", 8, true});
+    }
+    return plans;
+}
 
 std::vector<nlohmann::json> measure_bench(const std::vector<std::string>& scenes, const BenchOptions& o) {
     if (std::count(o.layouts.begin(), o.layouts.end(), "compressed") && std::count(o.tracers.begin(), o.tracers.end(), "stream"))

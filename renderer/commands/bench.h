@@ -1,4 +1,5 @@
 #pragma once
+#include "accel/memory_budget.h"
 #include "accel/two_level.h"
 
 #include <nlohmann/json.hpp>
@@ -44,6 +45,9 @@ struct BenchOptions {
     std::optional<std::string> dynamic;
     std::optional<uint64_t> memory_limit;  // bytes: lowers the memory bound below what the machine has free
 };
+
+// The builds a bench keeps until its report, one per row as it makes them: the memory bound plans for all of them.
+std::vector<BuildPlan> build_plans(const BenchOptions& o);
 
 // Runs ../shared/BENCHMARK.md's measurement for every requested accelerator in one process,
 // alternating between them build by build and frame by frame; prints the table, writes JSON.
