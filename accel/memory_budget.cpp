@@ -152,7 +152,7 @@ MemoryEstimate estimate_memory(const SceneSize& size, std::span<const BuildPlan>
     for (const BuildPlan& plan : plans) {
         const MemoryEstimate e = plan_terms(size, plan);
         total.flat += e.flat;
-        total.references += e.references;
+        total.references = std::max(total.references, e.references);  // one build at a time
         total.binary += e.binary;
         total.layout += e.layout;
     }

@@ -42,7 +42,8 @@ struct MemoryEstimate {
 // PrimRef slots a builder allocates per triangle at most (sbvh 2, presplit 1.5, ...); 1 for builders that do not split.
 double reference_cap_per_triangle(const std::string& builder);
 
-// The scene counted once; each plan's build terms summed, as the bench keeps every row's accelerator alive.
+// The scene counted once; each plan's trees (binary BVH, layout) summed, as the bench keeps every row's accelerator
+// alive; the largest plan's PrimRefs and build scratch, as rows build one after another and free them.
 MemoryEstimate estimate_memory(const SceneSize& size, std::span<const BuildPlan> plans);
 
 struct MemoryAvailable {
