@@ -110,8 +110,12 @@ double bittner_frame(const SceneStatistics& s) {
     return slivers(s) ? 0.87 : dense_boxes(s) ? 0.85 : architecture(s) ? 0.96 : 1.04;
 }
 // One-triangle leaves, merged into blocks in the wide layout: architecture 1.10 to 1.28, scans 1.06 to 1.12,
-// slivers 1.36 and 1.49. The cheapest build, so it wins where a frame is cheap against building.
-double lbvh_frame(const SceneStatistics& s) { return slivers(s) ? 1.42 : architecture(s) ? 1.2 : 1.09; }
+// slivers 1.36 and 1.49; overlapping instances 1.25 (zoo-64's flattened scans, whose Morton order interleaves the
+// instances' triangles). The cheapest build, so it wins where a frame is cheap against building.
+double lbvh_frame(const SceneStatistics& s) {
+    const bool instanced = s.triangles > s.unique_triangles;
+    return instanced ? 1.25 : slivers(s) ? 1.42 : architecture(s) ? 1.2 : 1.09;
+}
 // zoo-64, traversal against flat's: rebraid 1.28 and 1.32 (two runs of commit 99a5deb; 1.035 and 1.063 in runs of
 // 2026-12-04, before flat frames got faster: 181 to 183 ms against 227, rebraid's 234 to 240 against 241). Plain
 // two-level (1.34) builds in the same time and traces slower, so it is no candidate.
