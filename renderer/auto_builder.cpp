@@ -93,6 +93,8 @@ bool architecture(const SceneStatistics& s) { return s.box_excess < kScanExcess;
 // 2.9. Splitting pays there even without slivers.
 constexpr double kSplitCover = 5.0;
 bool dense_boxes(const SceneStatistics& s) { return architecture(s) && s.reducible_cover > kSplitCover; }
+// Objects placed more than once: flattening copies them.
+bool instanced(const SceneStatistics& s) { return s.triangles > s.unique_triangles; }
 
 double same_as_binned(const SceneStatistics&) { return 1.0; }
 // crytek-sponza 0.92; other architecture 1.00 to 1.15; scans 0.98 to 1.03; gen:cylinders 0.64, gen:foliage 0.54.
@@ -113,8 +115,7 @@ double bittner_frame(const SceneStatistics& s) {
 // slivers 1.36 and 1.49; overlapping instances 1.25 (zoo-64's flattened scans, whose Morton order interleaves the
 // instances' triangles). The cheapest build, so it wins where a frame is cheap against building.
 double lbvh_frame(const SceneStatistics& s) {
-    const bool instanced = s.triangles > s.unique_triangles;
-    return instanced ? 1.25 : slivers(s) ? 1.42 : architecture(s) ? 1.2 : 1.09;
+    return instanced(s) ? 1.25 : slivers(s) ? 1.42 : architecture(s) ? 1.2 : 1.09;
 }
 // zoo-64, traversal against flat's: rebraid 1.28 and 1.32 (two runs of commit 99a5deb; 1.035 and 1.063 in runs of
 // 2026-12-04, before flat frames got faster: 181 to 183 ms against 227, rebraid's 234 to 240 against 241). Plain
@@ -152,10 +153,9 @@ constexpr uint64_t kMaxFlattenedTriangles = 16'000'000;
 bool allowed(const Prior& p, const SceneStatistics& stats) {
     // Where its automatic SA_max splits nothing, esc builds binned's very tree: measuring it would be waste.
     if (std::string(p.builder) == "esc" && stats.box_fill >= kEscMaxFillToSplit) return false;
-    const bool instanced = stats.triangles > stats.unique_triangles;
     const bool two_level = std::string(p.toplevel) != "flat";
-    if (two_level) return instanced;  // two-level only with instances
-    return !instanced || stats.triangles <= kMaxFlattenedTriangles;
+    if (two_level) return instanced(stats);  // two-level only with instances
+    return !instanced(stats) || stats.triangles <= kMaxFlattenedTriangles;
 }
 
 double geometric_mean(const std::vector<double>& ratios) {
