@@ -197,22 +197,22 @@ std::vector<CandidateEstimate> prior_estimates(const SceneStatistics& stats, int
     return out;
 }
 
-// The first candidate measured: the one predicted best, unless its build costs more than kFirstRisk of its predicted
-// time to image over the cheapest build predicted within kFirstSpread of it; then that cheapest build, which gives
-// the priors their scale before an expensive build is risked on them (conference, 16 frames: bittner, predicted
-// best, 4% of the time to image over lbvh's build, was built for 1.6 s and then traced no faster than binned). Always
-// starting from the cheapest build near the best had auto measure lbvh first at one frame on small scans, where it
-// predicts lbvh's frame 9% slower than binned's (armadillo: 1.09 measured) for 1% of the time to image saved in the
-// build, and then keep lbvh, as binned's build and sample would no longer pay for themselves (1.07 to 1.11 of the
-// best time to image).
+// The first candidate measured: the one predicted best, unless it costs more to build than it is predicted to save
+// over the cheapest build predicted within kFirstSpread of it; then that cheapest build, which gives the priors their
+// scale before an expensive build is risked on them (conference, 16 frames: bittner, predicted best by 0.2 s for 1 s
+// more build, was built for 1.6 s and then traced no faster than binned). Always starting from the cheapest build
+// near the best had auto measure lbvh first at one frame on small scans, where binned is predicted to save several
+// times its extra build (armadillo: 12 ms for 1.6 ms), and then keep lbvh, as binned's whole build and sample would
+// no longer pay for themselves (1.07 to 1.11 of the best time to image).
 constexpr double kFirstSpread = 1.1;
-constexpr double kFirstRisk = 0.02;
 size_t first_candidate(const std::vector<CandidateEstimate>& prior, int frames) {
     const double best = prior.front().time_to_image_ms(frames);  // prior_estimates sorts them
     size_t cheapest = 0;
     for (size_t i = 1; i < prior.size(); ++i)
         if (prior[i].time_to_image_ms(frames) <= kFirstSpread * best && prior[i].build_ms < prior[cheapest].build_ms) cheapest = i;
-    return prior.front().build_ms - prior[cheapest].build_ms <= kFirstRisk * best ? 0 : cheapest;
+    const double extra_build = prior.front().build_ms - prior[cheapest].build_ms;
+    const double saving = prior[cheapest].time_to_image_ms(frames) - best;
+    return extra_build <= saving ? 0 : cheapest;
 }
 
 AutoChoice choose_builder(const SceneStatistics& stats, int frames, uint64_t pixels, Calibration& calibration) {

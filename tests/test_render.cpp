@@ -414,7 +414,7 @@ double samples_ms(const AutoChoice& choice) {
     return sum;
 }
 
-TEST_CASE("auto measures the predicted best first unless its build risks much more than a cheaper one's", "[auto]") {
+TEST_CASE("auto measures the predicted best first unless its extra build exceeds what it is predicted to save", "[auto]") {
     // A small scan seen from outside, planned for one frame: binned is predicted best, lbvh's frame 9% slower for a
     // build cheaper by far less than that; binned is measured first, and it wins.
     SceneStatistics scan;
@@ -424,8 +424,8 @@ TEST_CASE("auto measures the predicted best first unless its build risks much mo
     FixedCosts scanner = prior_costs(scan, 1, kPixels);
     CHECK(choose_builder(scan, 1, kPixels, scanner).builder == "binned");
     CHECK(scanner.built.front() == "binned");
-    // A room planned for 20 frames: bittner is predicted best, for a build that costs over 2% of the time to image more
-    // than binned's, the cheapest build predicted within 10% of it, which is measured first.
+    // A room planned for 20 frames: bittner is predicted best, by less than its build costs over binned's, the cheapest
+    // build predicted within 10% of it, which is measured first.
     SceneStatistics room;
     room.triangles = room.unique_triangles = 331179;
     room.box_excess = 1.59, room.reducible_cover = 3.7, room.camera_inside = true, room.box_fill = 0.34;
@@ -437,7 +437,7 @@ TEST_CASE("auto measures the predicted best first unless its build risks much mo
     const CandidateEstimate* first = &prior.front();
     for (const CandidateEstimate& c : prior)
         if (c.time_to_image_ms(kFrames) <= 1.1 * prior.front().time_to_image_ms(kFrames) && c.build_ms < first->build_ms) first = &c;
-    REQUIRE(prior.front().build_ms - first->build_ms > 0.02 * prior.front().time_to_image_ms(kFrames));
+    REQUIRE(prior.front().build_ms - first->build_ms > first->time_to_image_ms(kFrames) - prior.front().time_to_image_ms(kFrames));
     // This "machine" traces sbvh's tree at half binned's frame, which no prior expects of an architectural scene.
     FixedCosts machine = prior_costs(room, kFrames, kPixels);
     machine.costs["sbvh"].frame_ms = 0.5 * machine.costs["binned"].frame_ms;
