@@ -96,20 +96,37 @@ bool dense_boxes(const SceneStatistics& s) { return architecture(s) && s.reducib
 // Objects placed more than once: flattening copies them.
 bool instanced(const SceneStatistics& s) { return s.triangles > s.unique_triangles; }
 
-double same_as_binned(const SceneStatistics&) { return 1.0; }
-// crytek-sponza 0.92; other architecture 1.00 to 1.15; scans 0.98 to 1.03; gen:cylinders 0.64, gen:foliage 0.54.
-double bonsai_split_frame(const SceneStatistics& s) {
-    return slivers(s) ? 0.59 : dense_boxes(s) ? 0.92 : architecture(s) ? 1.07 : 1.01;
+// Sliver fields whose slivers cross the scene, against clustered ones: the reducible cover grows with the triangle
+// count n about as n^0.6 in both generators (3 k to 400 k triangles), and gen:cylinders' (long diagonals through the
+// scene: 148 at 3 k triangles, 785 at 50 k, 1140 at 100 k) is 10x gen:foliage's (leaves in clusters around branches:
+// 12, 54 at 48 k, 100 at 100 k, 373 at 400 k); the boundary lies between them at every count. Splitting every
+// sliver's box at once (esc) pays most where slivers cross; splitting only where nodes overlap (sbvh, bonsai-split)
+// matches it where they cluster.
+constexpr double kCrossingCover = 0.35, kCrossingCoverExponent = 0.6;
+bool crossing_slivers(const SceneStatistics& s) {
+    return slivers(s) && s.reducible_cover > kCrossingCover * std::pow(double(s.unique_triangles), kCrossingCoverExponent);
 }
-// The same tree as binned where its automatic SA_max does not split; gen:cylinders 0.40, gen:foliage 0.52.
-double esc_frame(const SceneStatistics& s) { return slivers(s) ? 0.46 : 1.0; }
-// crytek-sponza 0.87; other architecture 0.96 to 1.05; scans 0.98 to 1.01; gen:cylinders 0.72, gen:foliage 0.48.
-double sbvh_frame(const SceneStatistics& s) { return slivers(s) ? 0.59 : dense_boxes(s) ? 0.87 : 1.0; }
+
+double same_as_binned(const SceneStatistics&) { return 1.0; }
+// crytek-sponza 0.92; other architecture 1.00 to 1.15; scans 0.98 to 1.03; gen:cylinders 0.63 and 0.64, gen:foliage
+// 0.52 and 0.54.
+double bonsai_split_frame(const SceneStatistics& s) {
+    return crossing_slivers(s) ? 0.64 : slivers(s) ? 0.53 : dense_boxes(s) ? 0.92 : architecture(s) ? 1.07 : 1.01;
+}
+// The same tree as binned where its automatic SA_max does not split; gen:cylinders 0.40 and 0.42, gen:foliage 0.51
+// and 0.52.
+double esc_frame(const SceneStatistics& s) { return crossing_slivers(s) ? 0.41 : slivers(s) ? 0.51 : 1.0; }
+// crytek-sponza 0.87; other architecture 0.96 to 1.05; scans 0.98 to 1.01; gen:cylinders 0.72 and 0.75, gen:foliage
+// 0.47 and 0.48.
+double sbvh_frame(const SceneStatistics& s) {
+    return crossing_slivers(s) ? 0.73 : slivers(s) ? 0.47 : dense_boxes(s) ? 0.87 : 1.0;
+}
 // Full sweeps instead of bins: 0.97 to 1.01 everywhere.
 double sweep_frame(const SceneStatistics&) { return 1.0; }
-// crytek-sponza 0.85; other architecture 0.94 to 0.99; scans 1.02 to 1.07; gen:cylinders 0.83, gen:foliage 0.91.
+// crytek-sponza 0.85; other architecture 0.94 to 0.99; scans 1.02 to 1.07; gen:cylinders 0.73 and 0.83, gen:foliage
+// 0.85 and 0.91.
 double bittner_frame(const SceneStatistics& s) {
-    return slivers(s) ? 0.87 : dense_boxes(s) ? 0.85 : architecture(s) ? 0.96 : 1.04;
+    return crossing_slivers(s) ? 0.78 : slivers(s) ? 0.88 : dense_boxes(s) ? 0.85 : architecture(s) ? 0.96 : 1.04;
 }
 // One-triangle leaves, merged into blocks in the wide layout: architecture 1.10 to 1.28, scans 1.06 to 1.12,
 // slivers 1.36 and 1.49; overlapping instances 1.25 (zoo-64's flattened scans, whose Morton order interleaves the
@@ -165,15 +182,22 @@ double geometric_mean(const std::vector<double>& ratios) {
 }
 
 // The measured candidates' costs against their priors, as factors for the others': how much faster or slower
-// this machine and scene are than the priors assumed.
+// this machine and scene are than the priors assumed. Frames by the samples' own readings.
 std::pair<double, double> measured_scales(const std::vector<CandidateEstimate>& now, const std::vector<CandidateEstimate>& prior) {
     std::vector<double> build, frame;
     for (size_t i = 0; i < now.size(); ++i) {
         if (!now[i].measured) continue;
         if (now[i].build_ms > 0.0 && prior[i].build_ms > 0.0) build.push_back(now[i].build_ms / prior[i].build_ms);
-        if (now[i].frame_ms > 0.0 && prior[i].frame_ms > 0.0) frame.push_back(now[i].frame_ms / prior[i].frame_ms);
+        if (now[i].sampled_frame_ms > 0.0 && prior[i].frame_ms > 0.0) frame.push_back(now[i].sampled_frame_ms / prior[i].frame_ms);
     }
     return {build.empty() ? 1.0 : geometric_mean(build), frame.empty() ? 1.0 : geometric_mean(frame)};
+}
+
+// A measured candidate's frame: its reading and its rescaled prior, geometrically weighted (sample_weight).
+double blended_frame(const CandidateEstimate& measured, double rescaled_prior_ms) {
+    if (measured.sampled_frame_ms <= 0.0 || rescaled_prior_ms <= 0.0) return measured.sampled_frame_ms;
+    const double w = measured.sample_weight;
+    return std::exp(w * std::log(measured.sampled_frame_ms) + (1.0 - w) * std::log(rescaled_prior_ms));
 }
 
 std::string label(const CandidateEstimate& c) { return c.toplevel == "flat" ? c.builder : c.toplevel + "/" + c.builder; }
@@ -228,6 +252,7 @@ AutoChoice choose_builder(const SceneStatistics& stats, int frames, uint64_t pix
         const auto [build_scale, frame_scale] = measured_scales(now, prior);
         std::optional<size_t> next;
         for (size_t i = 0; i < now.size(); ++i) {
+            if (now[i].measured) now[i].frame_ms = blended_frame(now[i], prior[i].frame_ms * frame_scale);
             if (decided[i]) continue;
             now[i].build_ms = prior[i].build_ms * build_scale, now[i].frame_ms = prior[i].frame_ms * frame_scale;
             if (!next || now[i].time_to_image_ms(frames) < now[*next].time_to_image_ms(frames)) next = i;
@@ -249,9 +274,14 @@ AutoChoice choose_builder(const SceneStatistics& stats, int frames, uint64_t pix
             continue;
         }
         c.build_ms = calibration.build(c.builder, c.toplevel);
-        std::tie(c.sample_ms, c.frame_ms) = calibration.sample_frame();
+        const SampleReading reading = calibration.sample_frame();
+        c.sample_ms = reading.cost_ms, c.sampled_frame_ms = reading.frame_ms, c.sample_weight = sample_weight(reading.timed_ms);
         c.measured = true;
         spent += c.build_ms + c.sample_ms;
+        // The newcomer against the best so far, both blended with their priors at the scale every reading now gives.
+        const double rescaled = measured_scales(now, prior).second;
+        c.frame_ms = blended_frame(c, prior[*next].frame_ms * rescaled);
+        if (best) now[*best].frame_ms = blended_frame(now[*best], prior[*best].frame_ms * rescaled);
         if (!best || c.frame_ms < now[*best].frame_ms) {
             if (best) calibration.discard(now[*best].builder, now[*best].toplevel);
             best = *next;
@@ -261,6 +291,9 @@ AutoChoice choose_builder(const SceneStatistics& stats, int frames, uint64_t pix
         choice.candidates.push_back(c);
     }
     if (!best) throw std::logic_error("auto: no candidate for this scene");
+    for (CandidateEstimate& c : choice.candidates)  // the measured frames as last blended
+        for (const CandidateEstimate& latest : now)
+            if (c.measured && latest.builder == c.builder && latest.toplevel == c.toplevel) c.frame_ms = latest.frame_ms;
     const CandidateEstimate& winner = now[*best];
     choice.builder = winner.builder, choice.toplevel = winner.toplevel;
     choice.calibration_ms = spent - winner.build_ms;
@@ -279,6 +312,11 @@ AutoChoice choose_builder(const SceneStatistics& stats, int frames, uint64_t pix
     return choice;
 }
 
+double sample_weight(double timed_ms) {
+    const double sample_variance = kSampleLogVariance / std::max(timed_ms, 1e-3);
+    return kPriorLogVariance / (kPriorLogVariance + sample_variance);
+}
+
 uint32_t next_sample_stride(uint32_t stride, double sample_ms, double min_ms) {
     const double sized = double(stride) * std::max(sample_ms, 0.0) / (kSampleAim * min_ms);
     return uint32_t(std::clamp(std::floor(sized), 1.0, std::max(1.0, double(stride / 2))));
@@ -291,8 +329,11 @@ std::string explain(const AutoChoice& choice, int frames) {
                   ("TTI@" + std::to_string(frames) + " ms").c_str(), "");
     out += line;
     for (const CandidateEstimate& c : choice.candidates) {
+        char measured[96] = "predicted; ";
+        if (c.measured)
+            std::snprintf(measured, sizeof measured, "measured (sample read %.2f ms, weight %.2f); ", c.sampled_frame_ms, c.sample_weight);
         std::snprintf(line, sizeof line, "  %-22s %10.2f %10.2f %14.1f  %s%s\n", label(c).c_str(), c.build_ms, c.frame_ms,
-                      c.time_to_image_ms(frames), c.measured ? "measured; " : "predicted; ", c.note.c_str());
+                      c.time_to_image_ms(frames), measured, c.note.c_str());
         out += line;
     }
     std::snprintf(line, sizeof line,

@@ -32,6 +32,13 @@ struct SceneStatistics {
 
 SceneStatistics scene_statistics(const Scene& scene, const FlatScene& flat);
 
+// One sample of the planned frame through a candidate's tree.
+struct SampleReading {
+    double cost_ms = 0.0;   // all it took, warm-up and retraced samples included: auto's time to image pays it
+    double timed_ms = 0.0;  // the timed trace the frame is read from: the longer, the less noise in that reading
+    double frame_ms = 0.0;  // the whole frame's time, read from the timed trace
+};
+
 // What auto measures on the machine at hand. The accelerator builds real trees and traces real sample pixels;
 // tests answer with fixed costs, so that decisions are pinned through predicted and "measured" costs, not timings.
 class Calibration {
@@ -39,9 +46,8 @@ public:
     virtual ~Calibration() = default;
     // Builds the candidate (keeping it until the next build of another); returns the build's milliseconds.
     virtual double build(const std::string& builder, const std::string& toplevel) = 0;
-    // Traces the sample pixels of the planned frame through the last build. Returns {the sample's milliseconds,
-    // the whole frame's milliseconds predicted from it}.
-    virtual std::pair<double, double> sample_frame() = 0;
+    // Traces the sample pixels of the planned frame through the last build.
+    virtual SampleReading sample_frame() = 0;
     // The candidate's tree is no longer wanted (it lost to another): its memory may go.
     virtual void discard(const std::string& builder, const std::string& toplevel) = 0;
     // The share of the frame's pixels a sample traces.
@@ -52,6 +58,8 @@ struct CandidateEstimate {
     std::string builder, toplevel;
     double build_ms = 0.0, frame_ms = 0.0;  // measured when `measured`, predicted otherwise
     double sample_ms = 0.0;                 // the sample's cost, when measured
+    double sampled_frame_ms = 0.0;          // the sample's own reading of the frame, when measured
+    double sample_weight = 0.0;             // that reading's weight in frame_ms against the rescaled prior's
     bool measured = false;
     std::string note;  // why it was or was not tried
     double time_to_image_ms(int frames) const { return build_ms + double(frames) * frame_ms; }
@@ -73,6 +81,15 @@ std::vector<CandidateEstimate> prior_estimates(const SceneStatistics& stats, int
 
 // The calibration may waste (build losers, trace samples) this share of the best time to image it has measured.
 constexpr double kCalibrationBudget = 0.05;
+
+// A measured candidate's frame time: its sample's reading and its prior rescaled by every measured candidate, each
+// weighted by the inverse of its variance in log terms. The prior's relative frame times are within about 10% on the
+// scenes they were fitted on, so kPriorLogVariance is 0.1 squared; a sample's reading varies with 1 / its timed
+// milliseconds, kSampleLogVariance of it at 1 ms (two samples of 0.15 ms, one tile in 128 of Wuson's frame, read
+// lbvh's frame at 0.86x binned's, which traced 0.95x lbvh's; the readings of 5 ms samples differ by 1 to 3%).
+constexpr double kPriorLogVariance = 0.01;
+constexpr double kSampleLogVariance = 0.003;
+double sample_weight(double timed_ms);
 
 // A sample of `sample_ms` through one tile in `stride` was too short to time (under `min_ms`): the stride of the
 // next, sized by this one's rate to take kSampleAim times min_ms, at most half of `stride` and at least 1 (the whole

@@ -462,7 +462,7 @@ private:
         return ms;
     }
 
-    std::pair<double, double> sample_frame() override {
+    SampleReading sample_frame() override {
         const PinholeCamera camera(scene_camera(scene_, flat_), sample_frame_.width, sample_frame_.height);
         const double pixels = double(sample_frame_.width) * double(sample_frame_.height);
         // Half a sample first, untimed, through the first tree: the first sample after waking the threads took 1.3x
@@ -479,7 +479,7 @@ private:
                 continue;
             }
             const double traced = double(traced_pixels(sample_frame_.width, sample_frame_.height, stride));
-            return {std::chrono::duration<double, std::milli>(end - warm_up).count(), traced > 0.0 ? ms * pixels / traced : 0.0};
+            return {std::chrono::duration<double, std::milli>(end - warm_up).count(), ms, traced > 0.0 ? ms * pixels / traced : 0.0};
         }
     }
 

@@ -383,7 +383,10 @@ struct FixedCosts final : Calibration {
         built.push_back(last);
         return costs.at(last).build_ms;
     }
-    std::pair<double, double> sample_frame() override { return {costs.at(last).frame_ms * share, costs.at(last).frame_ms}; }
+    SampleReading sample_frame() override {
+        const double frame = costs.at(last).frame_ms;
+        return {frame * share, frame * share, frame};
+    }
     void discard(const std::string& builder, const std::string& toplevel) override { discarded.push_back(key(builder, toplevel)); }
     double sampled_share() const override { return share; }
 };
@@ -452,11 +455,38 @@ TEST_CASE("auto measures the predicted best first unless its extra build exceeds
         if (!c.measured) CHECK(c.note.find("not measured") != std::string::npos);
     CHECK(choice.reason.find("reducible cover 3.7") != std::string::npos);
     CHECK(choice.reason.find("20 frames planned: sbvh") != std::string::npos);
-    // Its own time to image: every build and sample, and the winner's frames.
+    // Its own time to image: every build and sample, and the winner's frames, its 8 ms sample's reading weighed
+    // against the prior, which expects sbvh's frame no faster than binned's.
     double builds = 0.0;
     for (const CandidateEstimate& c : choice.candidates)
         if (c.measured) builds += c.build_ms;
-    CHECK(choice.time_to_image_ms == Approx(builds + samples_ms(choice) + kFrames * machine.costs["sbvh"].frame_ms));
+    const auto winner = std::find_if(choice.candidates.begin(), choice.candidates.end(),
+                                     [](const CandidateEstimate& c) { return c.builder == "sbvh"; });
+    REQUIRE(winner != choice.candidates.end());
+    CHECK(winner->sampled_frame_ms == Approx(machine.costs["sbvh"].frame_ms));
+    CHECK(winner->sample_weight > 0.9);
+    CHECK(winner->frame_ms > winner->sampled_frame_ms);
+    CHECK(winner->frame_ms < 1.05 * winner->sampled_frame_ms);
+    CHECK(choice.time_to_image_ms == Approx(builds + samples_ms(choice) + kFrames * winner->frame_ms));
+}
+
+TEST_CASE("auto weighs a sample's reading against the priors by the sample's length", "[auto]") {
+    // A small scan planned for one frame, traced through one pixel in a thousand: lbvh's sample reads its frame at
+    // 0.9x binned's, where the priors expect 1.09x. Every candidate but bittner fits the calibration budget.
+    SceneStatistics scan;
+    scan.triangles = scan.unique_triangles = 3732, scan.box_excess = 2.05, scan.reducible_cover = 2.0, scan.box_fill = 0.35;
+    const auto choose = [&](uint64_t pixels) {
+        FixedCosts machine = prior_costs(scan, 1, pixels);
+        machine.costs["lbvh"].frame_ms = 0.9 * machine.costs["binned"].frame_ms;
+        machine.share = 0.001;
+        const AutoChoice choice = choose_builder(scan, 1, pixels, machine);
+        CHECK(std::find(machine.built.begin(), machine.built.end(), "lbvh") != machine.built.end());
+        return choice.builder;
+    };
+    CHECK(sample_weight(0.15) < 0.5);
+    CHECK(choose(kPixels) == "binned");       // samples of 0.16 ms: the priors outweigh them
+    CHECK(sample_weight(4.0) > 0.9);
+    CHECK(choose(30 * kPixels) == "lbvh");    // 4.7 ms: the reading outweighs the priors
 }
 
 TEST_CASE("auto stays within 10% of the best time to image when the priors hold", "[auto]") {
@@ -496,6 +526,19 @@ TEST_CASE("auto splits where splitting pays on this machine, not where the stati
     CHECK(choose_builder(foliage, 256, kPixels, gain).builder == "sbvh");
     FixedCosts one = prior_costs(foliage, 1, kPixels);
     CHECK(choose_builder(foliage, 1, kPixels, one).time_to_image_ms <= 1.1 * prior_estimates(foliage, 1, kPixels).front().time_to_image_ms(1));
+}
+
+TEST_CASE("auto expects esc to lead where slivers cross the scene, and sbvh where they cluster", "[auto]") {
+    const auto fastest_frame = [](const Scene& scene) {
+        const std::vector<CandidateEstimate> candidates = prior_estimates(scene_statistics(scene, flatten(scene)), 256, kPixels);
+        return std::min_element(candidates.begin(), candidates.end(), [](const CandidateEstimate& a, const CandidateEstimate& b) {
+                   return a.frame_ms < b.frame_ms;
+               })->builder;
+    };
+    for (const char* crossing : {"gen:cylinders?tris=3000&seed=2", "gen:cylinders?tris=50000&seed=7"})
+        CHECK(fastest_frame(load_scene(crossing)) == "esc");
+    for (const char* clustered : {"gen:foliage?tris=3000&seed=2", "gen:foliage?tris=48000&seed=4"})
+        CHECK(fastest_frame(load_scene(clustered)) == "sbvh");
 }
 
 TEST_CASE("auto measures esc only where its automatic SA_max splits", "[auto]") {

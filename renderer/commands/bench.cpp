@@ -299,6 +299,8 @@ nlohmann::json auto_json(const AutoChoice* choice, int frames) {
         candidates.push_back({{"builder", c.builder}, {"toplevel", c.toplevel}, {"measured", c.measured},
                               {"build_ms", c.build_ms}, {"frame_ms", c.frame_ms},
                               {"sample_ms", c.measured ? nlohmann::json(c.sample_ms) : nlohmann::json(nullptr)},
+                              {"sampled_frame_ms", c.measured ? nlohmann::json(c.sampled_frame_ms) : nlohmann::json(nullptr)},
+                              {"sample_weight", c.measured ? nlohmann::json(c.sample_weight) : nlohmann::json(nullptr)},
                               {"time_to_image_ms", c.time_to_image_ms(frames)}, {"note", c.note}});
     return {{"calibration_ms", choice->calibration_ms}, {"budget_ms", choice->budget_ms}, {"candidates", candidates}};
 }
