@@ -159,10 +159,14 @@ constexpr Prior kPriors[] = {
 };
 // Frame time per pixel with binned, 2 threads, bvh8: rooms seen from inside 1.4 to 2.6 us (crytek-sponza, sibenik,
 // conference), objects seen from outside 0.07 to 0.6 us (geometric mean 0.2: the scans, cornell-box, gen:box,
-// gen:surface, zoo-64), the sliver field 6.3 us. The calibration replaces these by what it measures.
-constexpr double kInsideNsPerPixel = 2000.0, kOutsideNsPerPixel = 200.0, kSliverNsPerPixel = 6300.0;
+// gen:surface, zoo-64); slivers crossing the scene 3.0 us (gen:cylinders), clustered ones 0.47 us (gen:foliage; at
+// 3.0 us, auto expected a one-frame foliage image to be all frame and built sbvh first, for 1.23x the best time to
+// image). The calibration replaces these by what it measures.
+constexpr double kInsideNsPerPixel = 2000.0, kOutsideNsPerPixel = 200.0;
+constexpr double kCrossingSliverNsPerPixel = 3000.0, kClusteredSliverNsPerPixel = 470.0;
 double frame_ns_per_pixel(const SceneStatistics& s) {
-    return slivers(s) ? kSliverNsPerPixel : s.camera_inside ? kInsideNsPerPixel : kOutsideNsPerPixel;
+    if (slivers(s)) return crossing_slivers(s) ? kCrossingSliverNsPerPixel : kClusteredSliverNsPerPixel;
+    return s.camera_inside ? kInsideNsPerPixel : kOutsideNsPerPixel;
 }
 // Flattening copies every instance: past this many triangles (about 2 GB of flat layout) two-level only.
 constexpr uint64_t kMaxFlattenedTriangles = 16'000'000;
