@@ -247,6 +247,7 @@ AutoChoice choose_builder(const SceneStatistics& stats, int frames, uint64_t pix
     const std::vector<CandidateEstimate> prior = prior_estimates(stats, frames, pixels);
     std::vector<CandidateEstimate> now = prior;
     std::vector<bool> decided(now.size(), false);
+    std::vector<size_t> order;  // the candidates as auto decided on them
     AutoChoice choice;
     std::optional<size_t> best;  // the measured candidate of the least frame time: its build is spent already
     double spent = 0.0;          // every build and sample so far
@@ -256,7 +257,6 @@ AutoChoice choose_builder(const SceneStatistics& stats, int frames, uint64_t pix
         const auto [build_scale, frame_scale] = measured_scales(now, prior);
         std::optional<size_t> next;
         for (size_t i = 0; i < now.size(); ++i) {
-            if (now[i].measured) now[i].frame_ms = blended_frame(now[i], prior[i].frame_ms * frame_scale);
             if (decided[i]) continue;
             now[i].build_ms = prior[i].build_ms * build_scale, now[i].frame_ms = prior[i].frame_ms * frame_scale;
             if (!next || now[i].time_to_image_ms(frames) < now[*next].time_to_image_ms(frames)) next = i;
@@ -265,6 +265,7 @@ AutoChoice choose_builder(const SceneStatistics& stats, int frames, uint64_t pix
         if (!next) break;
         CandidateEstimate& c = now[*next];
         decided[*next] = true;
+        order.push_back(*next);
         const double left_ms = best ? frames_ms(now[*best]) : 0.0;
         const double budget = kCalibrationBudget * (best ? now[*best].build_ms + left_ms : 0.0);
         const double waste = spent - (best ? now[*best].build_ms : 0.0);
@@ -274,7 +275,6 @@ AutoChoice choose_builder(const SceneStatistics& stats, int frames, uint64_t pix
         else if (waste + c.build_ms + sample <= budget) c.note = "within the calibration budget";
         else {
             c.note = "not measured: saves less than its build as predicted, and over the budget";
-            choice.candidates.push_back(c);
             continue;
         }
         c.build_ms = calibration.build(c.builder, c.toplevel);
@@ -282,22 +282,20 @@ AutoChoice choose_builder(const SceneStatistics& stats, int frames, uint64_t pix
         c.sample_ms = reading.cost_ms, c.sampled_frame_ms = reading.frame_ms, c.sample_weight = sample_weight(reading.timed_ms);
         c.measured = true;
         spent += c.build_ms + c.sample_ms;
-        // The newcomer against the best so far, both blended with their priors at the scale every reading now gives.
+        // Every measured frame blended with its prior at the scale every reading now gives; then the newcomer against
+        // the best so far.
         const double rescaled = measured_scales(now, prior).second;
-        c.frame_ms = blended_frame(c, prior[*next].frame_ms * rescaled);
-        if (best) now[*best].frame_ms = blended_frame(now[*best], prior[*best].frame_ms * rescaled);
+        for (size_t i = 0; i < now.size(); ++i)
+            if (now[i].measured) now[i].frame_ms = blended_frame(now[i], prior[i].frame_ms * rescaled);
         if (!best || c.frame_ms < now[*best].frame_ms) {
             if (best) calibration.discard(now[*best].builder, now[*best].toplevel);
             best = *next;
         } else {
             calibration.discard(c.builder, c.toplevel);
         }
-        choice.candidates.push_back(c);
     }
     if (!best) throw std::logic_error("auto: no candidate for this scene");
-    for (CandidateEstimate& c : choice.candidates)  // the measured frames as last blended
-        for (const CandidateEstimate& latest : now)
-            if (c.measured && latest.builder == c.builder && latest.toplevel == c.toplevel) c.frame_ms = latest.frame_ms;
+    for (const size_t i : order) choice.candidates.push_back(now[i]);
     const CandidateEstimate& winner = now[*best];
     choice.builder = winner.builder, choice.toplevel = winner.toplevel;
     choice.calibration_ms = spent - winner.build_ms;

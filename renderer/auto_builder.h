@@ -98,12 +98,12 @@ constexpr double kSampleAim = 1.25;
 uint32_t next_sample_stride(uint32_t stride, double sample_ms, double min_ms);
 
 // Chooses a candidate for `frames` frames of `pixels` pixels. Measures first the candidate predicted best, or, where
-// it costs more to build than it is predicted to save over the cheapest build predicted near it, that one; then, in the order of
-// what each would cost from here (build + frames), every candidate predicted to save more than its build against the
-// best measured frames, and every other whose build and sample fit the budget; predicts the untried ones by scaling
-// their priors by what the measured ones took against theirs, and the measured ones' frames by their samples'
-// readings weighed against those rescaled priors (sample_weight). A measured tree's build is spent, so the measured
-// candidate of the least frame time wins.
+// it costs more to build than it is predicted to save over the cheapest build predicted near it, that one; then, in
+// the order of what each would cost from here (build + frames), every candidate predicted to save more than its build
+// against the best measured frames, and every other whose build and sample fit the budget; predicts the untried ones
+// by scaling their priors by what the measured ones took against theirs, and the measured ones' frames by their
+// samples' readings weighed against those rescaled priors (sample_weight). A measured tree's build is spent, so the
+// measured candidate of the least frame time wins.
 AutoChoice choose_builder(const SceneStatistics& stats, int frames, uint64_t pixels, Calibration& calibration);
 
 // --explain: one line per candidate (predicted or measured build and frame, time to image, note), then the winner.
