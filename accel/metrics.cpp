@@ -228,6 +228,19 @@ double sah_cost(const WideBvh<N>& bvh, SahCosts costs) {
     return root_area > 0.0 ? sum / root_area : 0.0;
 }
 
+double sibling_overlap(const Bvh& bvh) {
+    double overlap = 0.0, inner = 0.0;
+    for (const BvhNode& node : bvh.nodes) {
+        if (node.is_leaf()) continue;
+        const BBox& left = bvh.nodes[node.index].bounds;
+        const BBox& right = bvh.nodes[node.index + 1].bounds;
+        const BBox shared{glm::max(left.lower, right.lower), glm::min(left.upper, right.upper)};  // empty() if apart
+        overlap += shared.half_area();
+        inner += node.bounds.half_area();
+    }
+    return inner > 0.0 ? overlap / inner : 0.0;
+}
+
 template double epo_cost<2>(const WideBvh<2>&, std::span<const Triangle>, SahCosts);
 template double epo_cost<4>(const WideBvh<4>&, std::span<const Triangle>, SahCosts);
 template double epo_cost<8>(const WideBvh<8>&, std::span<const Triangle>, SahCosts);

@@ -1,6 +1,7 @@
 #pragma once
-// Tree quality metrics beyond the binary tree's SAH (bvh.h): SAH of wide trees, and end-point overlap (eq. 3
-// of Aila, Karras and Laine 2013, "On Quality Metrics of Bounding Volume Hierarchies") of any tree.
+// Tree quality metrics beyond the binary tree's SAH (bvh.h): SAH of wide trees, end-point overlap (eq. 3 of Aila,
+// Karras and Laine 2013, "On Quality Metrics of Bounding Volume Hierarchies") of any tree, and how much siblings
+// overlap.
 #include "accel/bvh.h"
 #include "accel/wide_bvh.h"
 
@@ -23,5 +24,13 @@ double sah_cost(const WideBvh<N>& bvh, SahCosts costs = {});
 double epo_cost(const Bvh& bvh, std::span<const Triangle> triangles, SahCosts costs = {});
 template <int N>
 double epo_cost(const WideBvh<N>& bvh, std::span<const Triangle> triangles, SahCosts costs = {});
+
+// How much sibling boxes overlap: the sum over inner nodes of the half area of their two children's boxes'
+// intersection, over the sum of the inner nodes' half areas: 0 where a gap separates every node's children, up to 1
+// where every child is its parent's box (children that touch share a face, whose area counts: a ray across it
+// enters both). Of an object-split tree, it says what object splits could not separate,
+// which is what spatial splits (Stich et al. 2009, sec. 3: they are tried where object splits' children overlap)
+// can recover.
+double sibling_overlap(const Bvh& bvh);
 
 }  // namespace canopy

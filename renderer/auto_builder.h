@@ -39,6 +39,12 @@ struct SampleReading {
     double frame_ms = 0.0;  // the whole frame's time, read from the timed trace
 };
 
+// A reading of a candidate's binary tree.
+struct TreeReading {
+    double sibling_overlap = -1.0;  // accel/metrics.h; negative where the build kept no binary tree
+    double cost_ms = 0.0;           // what reading it took: auto's time to image pays it
+};
+
 // What auto measures on the machine at hand. The accelerator builds real trees and traces real sample pixels;
 // tests answer with fixed costs, so that decisions are pinned through predicted and "measured" costs, not timings.
 class Calibration {
@@ -48,6 +54,8 @@ public:
     virtual double build(const std::string& builder, const std::string& toplevel) = 0;
     // Traces the sample pixels of the planned frame through the last build.
     virtual SampleReading sample_frame() = 0;
+    // Reads the last build's binary tree.
+    virtual TreeReading read_tree() = 0;
     // The candidate's tree is no longer wanted (it lost to another): its memory may go.
     virtual void discard(const std::string& builder, const std::string& toplevel) = 0;
     // The share of the frame's pixels a sample traces.
@@ -73,6 +81,7 @@ struct AutoChoice {
     double calibration_ms = 0.0;    // builds of the losers and every sample: what measuring cost on top of the winner
     double budget_ms = 0.0;         // what the calibration may waste: kCalibrationBudget of the winner's time to image
     double time_to_image_ms = 0.0;  // predicted for auto itself: every build and sample, and the winner's frames
+    double sibling_overlap = -1.0;  // of binned's tree, where binned was measured and sbvh judged by it; else negative
 };
 
 // The candidates, build and frame costs predicted from the statistics alone (the order the calibration tries
@@ -97,13 +106,17 @@ double sample_weight(double timed_ms);
 constexpr double kSampleAim = 1.25;
 uint32_t next_sample_stride(uint32_t stride, double sample_ms, double min_ms);
 
+// sbvh's frame relative to binned's on a scene without slivers whose binned tree has this sibling overlap.
+double sbvh_frame_from_overlap(double overlap);
+
 // Chooses a candidate for `frames` frames of `pixels` pixels. Measures first the candidate predicted best, or, where
 // it costs more to build than it is predicted to save over the cheapest build predicted near it, that one; then, in
 // the order of what each would cost from here (build + frames), every candidate predicted to save more than its build
 // against the best measured frames, and every other whose build and sample fit the budget; predicts the untried ones
 // by scaling their priors by what the measured ones took against theirs, and the measured ones' frames by their
-// samples' readings weighed against those rescaled priors (sample_weight). A measured tree's build is spent, so the
-// measured candidate of the least frame time wins.
+// samples' readings weighed against those rescaled priors (sample_weight). Once binned's tree is measured, sbvh's
+// frame is predicted from that tree's sibling overlap (sbvh_frame_from_overlap) instead of the scene's class. A
+// measured tree's build is spent, so the measured candidate of the least frame time wins.
 AutoChoice choose_builder(const SceneStatistics& stats, int frames, uint64_t pixels, Calibration& calibration);
 
 // --explain: one line per candidate (predicted or measured build and frame, time to image, note), then the winner.

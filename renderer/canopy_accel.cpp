@@ -240,6 +240,9 @@ public:
             if (options_.layout == NodeLayout::Compressed) layout_ = compress(std::get<WideBvh<8>>(std::move(layout_)));
     }
 
+    // The sibling overlap of the binary tree (accel/metrics.h); negative where there is none (two-level, direct).
+    double sibling_overlap() const { return binary_.nodes.empty() ? -1.0 : canopy::sibling_overlap(binary_); }
+
     // The builder's binary BVH and its collapse into the kernel's layout.
     void build_binary_and_collapse() {
         binary_ = builder_.build(BuildInput{scene_.triangles, std::move(refs_)}, settings_);
@@ -490,6 +493,11 @@ private:
         last_->render(ShadingScene{flat_, settings}, camera, 0, scratch_, {});
     }
 
+    TreeReading read_tree() override {
+        const auto start = std::chrono::steady_clock::now();
+        const double overlap = last_ ? last_->sibling_overlap() : -1.0;
+        return {overlap, std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count()};
+    }
     void discard(const std::string& builder, const std::string& toplevel) override { trees_.erase(key(builder, toplevel)); }
     double sampled_share() const override { return 1.0 / double(stride_); }
 

@@ -90,6 +90,40 @@ TEST_CASE("EPO of built trees is positive, and the same with 1 and 2 threads", "
     }
 }
 
+TEST_CASE("sibling overlap is the children's shared box area over the inner nodes' areas", "[metrics]") {
+    Bvh bvh;
+    // Root [0,3]^3 (half area 27) over inner [0,2]^3 (12) and leaf [1,3]^3: they share [1,2]^3 (3). The inner
+    // node's leaves [0,0.5]^3 and [1.5,2]^3 lie apart (0).
+    bvh.nodes = {{{Vec3(0), Vec3(3)}, 1, 0},
+                 {{Vec3(0), Vec3(2)}, 3, 0},
+                 {{Vec3(1), Vec3(3)}, 0, 1},
+                 {{Vec3(0), Vec3(0.5f)}, 1, 1},
+                 {{Vec3(1.5f), Vec3(2)}, 2, 1}};
+    bvh.refs = {0, 1, 2};
+    CHECK(sibling_overlap(bvh) == Approx(3.0 / (27.0 + 12.0)));
+    // Children that touch share a face: [0,1]x[0,1]x[0,1] and [1,2]x[0,1]x[0,1] share x = 1 (area 1), over the
+    // root's half area 5.
+    bvh.nodes = {{{Vec3(0), Vec3(2, 1, 1)}, 1, 0}, {{Vec3(0), Vec3(1)}, 0, 1}, {{Vec3(1, 0, 0), Vec3(2, 1, 1)}, 1, 1}};
+    bvh.refs = {0, 1};
+    CHECK(sibling_overlap(bvh) == Approx(1.0 / 5.0));
+    // One leaf: no siblings.
+    bvh.nodes = {{{Vec3(0), Vec3(1)}, 0, 2}};
+    CHECK(sibling_overlap(bvh) == 0.0);
+    // Identical children: all of every inner node's area.
+    bvh.nodes = {{{Vec3(0), Vec3(1)}, 1, 0}, {{Vec3(0), Vec3(1)}, 0, 1}, {{Vec3(0), Vec3(1)}, 1, 1}};
+    CHECK(sibling_overlap(bvh) == Approx(1.0));
+}
+
+TEST_CASE("sibling overlap of built trees lies in [0, 1], and sbvh's is below binned's on long slivers", "[metrics]") {
+    const FlatScene flat = flatten(load_scene("gen:cylinders?tris=" + std::to_string(scaled(4000, 1000)) + "&seed=3"));
+    const double binned = sibling_overlap(build_with("binned", flat.triangles).binary);
+    const double sbvh = sibling_overlap(build_with("sbvh", flat.triangles).binary);
+    CHECK(binned > 0.0);
+    CHECK(binned <= 1.0);
+    CHECK(sbvh >= 0.0);
+    CHECK(sbvh < binned);  // spatial splits separate what object splits could not
+}
+
 TEST_CASE("LCV is the standard deviation of leaves visited per ray", "[metrics]") {
     // Two triangles in the plane z = 0. Straight down onto the first; along +x inside the plane (no triangle is
     // hit, every flat leaf box is touched); away from everything. With a leaf each (scalar build) the rays

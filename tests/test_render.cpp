@@ -387,8 +387,10 @@ struct FixedCosts final : Calibration {
         const double frame = costs.at(last).frame_ms;
         return {frame * share, frame * share, frame};
     }
+    TreeReading read_tree() override { return {overlap, 0.0}; }
     void discard(const std::string& builder, const std::string& toplevel) override { discarded.push_back(key(builder, toplevel)); }
     double sampled_share() const override { return share; }
+    double overlap = -1.0;  // every tree's sibling overlap; negative: none kept
 };
 
 // Costs exactly as the priors predict them for these statistics.
@@ -487,6 +489,46 @@ TEST_CASE("auto weighs a sample's reading against the priors by the sample's len
     CHECK(choose(kPixels) == "binned");       // samples of 0.16 ms: the priors outweigh them
     CHECK(sample_weight(4.0) > 0.9);
     CHECK(choose(30 * kPixels) == "lbvh");    // 4.7 ms: the reading outweighs the priors
+}
+
+TEST_CASE("sbvh's predicted frame falls with binned's sibling overlap, down to its floor", "[auto]") {
+    CHECK(sbvh_frame_from_overlap(0.0) == 1.0);
+    CHECK(sbvh_frame_from_overlap(0.17) == 1.0);
+    CHECK(sbvh_frame_from_overlap(0.18) < 1.0);
+    CHECK(sbvh_frame_from_overlap(0.215) < sbvh_frame_from_overlap(0.18));
+    CHECK(sbvh_frame_from_overlap(0.2) == Approx(0.886));
+    CHECK(sbvh_frame_from_overlap(0.5) == Approx(0.83));  // no extrapolation past the largest gain fitted
+}
+
+TEST_CASE("auto judges sbvh by the sibling overlap of binned's tree, once binned is measured", "[auto]") {
+    // sibenik's statistics planned for one frame: architecture without dense boxes, where the class prior expects
+    // sbvh to trace as fast as binned; on this machine it traces in 0.92x.
+    SceneStatistics room;
+    room.triangles = room.unique_triangles = 75284, room.box_excess = 1.61, room.reducible_cover = 3.6;
+    room.box_fill = 0.36, room.camera_inside = true;
+    const auto choose = [&](double overlap) {
+        FixedCosts machine = prior_costs(room, 1, kPixels);
+        machine.costs["sbvh"].frame_ms = 0.92 * machine.costs["binned"].frame_ms;
+        machine.overlap = overlap;
+        const AutoChoice choice = choose_builder(room, 1, kPixels, machine);
+        CHECK(machine.built.front() == "binned");
+        CHECK(choice.sibling_overlap == overlap);
+        return choice;
+    };
+    // No tree to read, or one whose siblings overlap as little as conference's: the build is not worth its
+    // predicted gain, nor within the budget.
+    CHECK(choose(-1.0).builder == "binned");
+    CHECK(choose(0.16).builder == "binned");
+    // Siblings that overlap as much as crytek-sponza's: sbvh is measured, and wins.
+    const AutoChoice overlapping = choose(0.215);
+    CHECK(overlapping.builder == "sbvh");
+    CHECK(overlapping.reason.find("sibling overlap 0.215") != std::string::npos);
+    // Sliver fields keep their class priors: the overlap is not read.
+    SceneStatistics slivers = room;
+    slivers.box_excess = 6.75;
+    FixedCosts machine = prior_costs(slivers, 1, kPixels);
+    machine.overlap = 0.215;
+    CHECK(choose_builder(slivers, 1, kPixels, machine).sibling_overlap < 0.0);
 }
 
 TEST_CASE("auto stays within 10% of the best time to image when the priors hold", "[auto]") {
