@@ -294,7 +294,7 @@ AutoChoice choose_builder(const SceneStatistics& stats, int frames, uint64_t pix
         const double left_ms = best ? frames_ms(now[*best]) : 0.0;
         const double budget = kCalibrationBudget * (best ? now[*best].build_ms + left_ms : 0.0);
         const double waste = spent - (best ? now[*best].build_ms : 0.0);
-        const double sample = c.frame_ms * calibration.sampled_share();
+        const double sample = calibration.sample_cost_ms(c.frame_ms);
         if (!best) c.note = *next == 0 ? "predicted best: measured first" : "the cheapest build predicted near the best: measured first";
         else if (c.build_ms + sample + frames_ms(c) < left_ms) c.note = "predicted to save more than its build";
         else if (waste + c.build_ms + sample <= budget) c.note = "within the calibration budget";
@@ -358,6 +358,12 @@ double sample_weight(double timed_ms) {
 uint32_t next_sample_stride(uint32_t stride, double sample_ms, double min_ms) {
     const double sized = double(stride) * std::max(sample_ms, 0.0) / (kSampleAim * min_ms);
     return uint32_t(std::clamp(std::floor(sized), 1.0, std::max(1.0, double(stride / 2))));
+}
+
+double expected_sample_cost_ms(double frame_ms, uint32_t stride, double min_ms) {
+    const double first = frame_ms / double(std::max(stride, 1u));
+    if (first >= min_ms || stride <= 1) return first;
+    return first + std::min(frame_ms, std::max(kSampleAim * min_ms, 2.0 * first));
 }
 
 std::string explain(const AutoChoice& choice, int frames) {

@@ -58,8 +58,8 @@ public:
     virtual TreeReading read_tree() = 0;
     // The candidate's tree is no longer wanted (it lost to another): its memory may go.
     virtual void discard(const std::string& builder, const std::string& toplevel) = 0;
-    // The share of the frame's pixels a sample traces.
-    virtual double sampled_share() const = 0;
+    // What a sample through a tree of this frame time is expected to cost, retraces for a longer timed sample included.
+    virtual double sample_cost_ms(double frame_ms) const = 0;
 };
 
 struct CandidateEstimate {
@@ -105,6 +105,10 @@ double sample_weight(double timed_ms);
 // frame). Growing by a fixed 4x instead overshot: on a 29 ms frame, samples of 0.9, 3.6 and then 14.5 ms.
 constexpr double kSampleAim = 1.25;
 uint32_t next_sample_stride(uint32_t stride, double sample_ms, double min_ms);
+// What such a sample costs through a tree of `frame_ms`: one tile in `stride`, and where that is under `min_ms`,
+// the retrace next_sample_stride sizes (kSampleAim times min_ms, twice the first at least, the whole frame at most).
+// Counting the first alone, the budget took forklift's 16-frame samples (1 ms, then 6.25) for a seventh of their cost.
+double expected_sample_cost_ms(double frame_ms, uint32_t stride, double min_ms);
 
 // sbvh's frame relative to binned's on a scene without slivers whose binned tree has this sibling overlap.
 double sbvh_frame_from_overlap(double overlap);

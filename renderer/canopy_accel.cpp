@@ -499,7 +499,7 @@ private:
         return {overlap, std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count()};
     }
     void discard(const std::string& builder, const std::string& toplevel) override { trees_.erase(key(builder, toplevel)); }
-    double sampled_share() const override { return 1.0 / double(stride_); }
+    double sample_cost_ms(double frame_ms) const override { return expected_sample_cost_ms(frame_ms, stride_, min_sample_ms_); }
 
     const Accelerator& built() const {
         if (!chosen_) throw std::logic_error("auto accelerator used before build()");

@@ -389,7 +389,7 @@ struct FixedCosts final : Calibration {
     }
     TreeReading read_tree() override { return {overlap, 0.0}; }
     void discard(const std::string& builder, const std::string& toplevel) override { discarded.push_back(key(builder, toplevel)); }
-    double sampled_share() const override { return share; }
+    double sample_cost_ms(double frame_ms) const override { return frame_ms * share; }
     double overlap = -1.0;  // every tree's sibling overlap; negative: none kept
 };
 
@@ -623,6 +623,18 @@ TEST_CASE("auto's explanation lists every candidate and the choice", "[auto]") {
     CHECK(choice.candidates.size() == 6);
     CHECK(text.find("chosen: " + choice.builder) != std::string::npos);
     CHECK(text.find("TTI@16") != std::string::npos);
+}
+
+TEST_CASE("auto's budget counts a sample's retrace where the first trace is too short to time", "[auto]") {
+    // forklift at 16 frames: a 30 ms frame, one tile in 32 (0.94 ms), then the retrace of 6.25 ms.
+    CHECK(expected_sample_cost_ms(30.0, 32, 5.0) == Approx(30.0 / 32 + kSampleAim * 5.0));
+    // A first trace long enough is all of it; so is one with no minimum (one frame planned).
+    CHECK(expected_sample_cost_ms(400.0, 32, 5.0) == Approx(12.5));
+    CHECK(expected_sample_cost_ms(30.0, 128, 0.0) == Approx(30.0 / 128));
+    // The retrace is at least twice the first, and at most the whole frame.
+    CHECK(expected_sample_cost_ms(150.0, 32, 5.0) == Approx(3.0 * 150.0 / 32));
+    CHECK(expected_sample_cost_ms(4.0, 32, 5.0) == Approx(4.0 / 32 + 4.0));
+    CHECK(expected_sample_cost_ms(4.0, 1, 5.0) == Approx(4.0));
 }
 
 TEST_CASE("a sample too short to time is traced again with as many tiles as its rate says it needs", "[auto]") {
