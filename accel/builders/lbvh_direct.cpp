@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <array>
 #include <bit>
+#include <cmath>
 
 namespace canopy {
 namespace {
@@ -67,20 +68,40 @@ private:
         return uint32_t(std::partition_point(codes_ + begin + 1, codes_ + end, [&](uint64_t c) { return !(c >> bit & 1); }) - codes_);
     }
 
-    // The children of the wide node over [begin, end): the whole range, then the largest child split in two
-    // (the first of equals), until there are N or all are leaves.
+    // A range's weight in the SAH, its references times the area of the Morton cell that holds them (the cell whose
+    // code prefix they share: its area quarters with every three bits of prefix, so it grows as 2^(2b/3) with b, the
+    // bits below the prefix). Equal codes share one point: the least weight for their count.
+    float weight(uint32_t begin, uint32_t end) const {
+        static const std::array<float, 65> cell_area = [] {
+            std::array<float, 65> a{};
+            for (int bits = 0; bits <= 64; ++bits) a[bits] = std::exp2(float(2 * bits) / 3.0f);
+            return a;
+        }();
+        const int bits = 64 - std::countl_zero(codes_[begin] ^ codes_[end - 1]);
+        return float(end - begin) * cell_area[bits];
+    }
+
+    // The children of the wide node over [begin, end): the whole range, then the child of the largest weight that
+    // does not fit a block split in two (the first of equals), until there are N or all fit a block. Splitting by
+    // count alone (Embree's Morton builder's rule) traced 1.097x the optimal collapse's frames against 1.080x, over
+    // ten scenes (docs/results.md, "lbvh's direct wide tree").
     Children<N> children_of(uint32_t begin, uint32_t end) const {
         Children<N> c;
+        std::array<float, N> weights;
         c.first[0] = begin, c.first[1] = end, c.count = 1;
+        weights[0] = weight(begin, end);
         while (c.count < N) {
-            int largest = -1;
-            for (int i = 0, most = kLanes; i < c.count; ++i)
-                if (c.size(i) > uint32_t(most)) largest = i, most = int(c.size(i));
-            if (largest < 0) break;
-            const uint32_t middle = split(c.first[largest], c.first[largest + 1]);
-            for (int k = c.count; k > largest; --k) c.first[k + 1] = c.first[k];
-            c.first[largest + 1] = middle;
+            int heaviest = -1;
+            for (int i = 0; i < c.count; ++i)
+                if (c.size(i) > kLanes && (heaviest < 0 || weights[i] > weights[heaviest])) heaviest = i;
+            if (heaviest < 0) break;
+            const uint32_t middle = split(c.first[heaviest], c.first[heaviest + 1]);
+            for (int k = c.count; k > heaviest; --k) c.first[k + 1] = c.first[k];
+            for (int k = c.count - 1; k > heaviest; --k) weights[k + 1] = weights[k];
+            c.first[heaviest + 1] = middle;
             ++c.count;
+            weights[heaviest] = weight(c.first[heaviest], middle);
+            weights[heaviest + 1] = weight(middle, c.first[heaviest + 2]);
         }
         return c;
     }
