@@ -181,6 +181,10 @@ double frame_ns_per_pixel(const SceneStatistics& s) {
     if (slivers(s)) return crossing_slivers(s) ? kCrossingSliverNsPerPixel : kClusteredSliverNsPerPixel;
     return s.camera_inside ? kInsideNsPerPixel : kOutsideNsPerPixel;
 }
+// A frame of `pixels` through a tree that traces in `relative` times binned's frame.
+double prior_frame_ms(const SceneStatistics& s, uint64_t pixels, double relative) {
+    return double(pixels) * frame_ns_per_pixel(s) * 1e-6 * relative;
+}
 // Flattening copies every instance: past this many triangles (about 2 GB of flat layout) two-level only.
 constexpr uint64_t kMaxFlattenedTriangles = 16'000'000;
 
@@ -222,7 +226,7 @@ void predict_sbvh_from_overlap(double overlap, const SceneStatistics& stats, uin
                                std::vector<CandidateEstimate>& prior, const std::vector<bool>& decided) {
     for (size_t i = 0; i < prior.size(); ++i)
         if (!decided[i] && prior[i].builder == "sbvh" && prior[i].toplevel == "flat")
-            prior[i].frame_ms = double(pixels) * frame_ns_per_pixel(stats) * 1e-6 * sbvh_frame_from_overlap(overlap);
+            prior[i].frame_ms = prior_frame_ms(stats, pixels, sbvh_frame_from_overlap(overlap));
 }
 
 std::string label(const CandidateEstimate& c) { return c.toplevel == "flat" ? c.builder : c.toplevel + "/" + c.builder; }
@@ -241,7 +245,7 @@ std::vector<CandidateEstimate> prior_estimates(const SceneStatistics& stats, int
         const double built = double(two_level ? stats.unique_triangles : stats.triangles);
         CandidateEstimate c{p.builder, p.toplevel};
         c.build_ms = built * (slivers(stats) ? p.sliver_build_ns_per_triangle : p.build_ns_per_triangle) * 1e-6;
-        c.frame_ms = double(pixels) * frame_ns_per_pixel(stats) * 1e-6 * p.relative_frame(stats);
+        c.frame_ms = prior_frame_ms(stats, pixels, p.relative_frame(stats));
         out.push_back(c);
     }
     std::stable_sort(out.begin(), out.end(), [&](const CandidateEstimate& a, const CandidateEstimate& b) {

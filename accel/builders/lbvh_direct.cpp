@@ -15,6 +15,13 @@ namespace {
 using wide_writing::Cursor;
 using wide_writing::Extent;
 
+// 2^(2b/3): the relative area of a Morton cell whose codes differ in their lowest b bits (DirectBuilder::weight).
+const std::array<float, 65> kCellArea = [] {
+    std::array<float, 65> area{};
+    for (int bits = 0; bits <= 64; ++bits) area[bits] = std::exp2(float(2 * bits) / 3.0f);
+    return area;
+}();
+
 // A wide node's children: ranges [first[i], first[i + 1]) of the sorted references, in Morton order.
 template <int N>
 struct Children {
@@ -72,13 +79,8 @@ private:
     // code prefix they share: its area quarters with every three bits of prefix, so it grows as 2^(2b/3) with b, the
     // bits below the prefix). Equal codes share one point: the least weight for their count.
     float weight(uint32_t begin, uint32_t end) const {
-        static const std::array<float, 65> cell_area = [] {
-            std::array<float, 65> a{};
-            for (int bits = 0; bits <= 64; ++bits) a[bits] = std::exp2(float(2 * bits) / 3.0f);
-            return a;
-        }();
         const int bits = 64 - std::countl_zero(codes_[begin] ^ codes_[end - 1]);
-        return float(end - begin) * cell_area[bits];
+        return float(end - begin) * kCellArea[bits];
     }
 
     // The children of the wide node over [begin, end): the whole range, then the child of the largest weight that
