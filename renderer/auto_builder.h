@@ -28,9 +28,14 @@ struct SceneStatistics {
     // The camera's eye inside the scene's bounds: a room seen from within, where paths bounce to the bounce limit
     // (crytek-sponza, sibenik, conference: 8.3 to 9 rays a pixel), not an object seen from outside (1.2 to 5.4).
     bool camera_inside = false;
+    // The areas of the triangles in the camera's view projected on its image plane, over the image's area: the
+    // share of the frame the scene covers times its depth complexity. Scans seen from outside 0.36 to 0.73,
+    // cornell-box 1.23, zoo-64 2.09; crytek-sponza, seen from inside, 8.4.
+    double projected_area = 1.0;
 };
 
-SceneStatistics scene_statistics(const Scene& scene, const FlatScene& flat);
+// `image_aspect`, width over height, frames the camera's view for projected_area.
+SceneStatistics scene_statistics(const Scene& scene, const FlatScene& flat, double image_aspect);
 
 // One sample of the planned frame through a candidate's tree.
 struct SampleReading {

@@ -424,7 +424,8 @@ public:
     void build() override {
         warmed_up_ = false;
         const uint64_t pixels = uint64_t(sample_frame_.width) * uint64_t(sample_frame_.height);
-        choice_ = choose_builder(scene_statistics(scene_, flat_), options_.frames_planned, pixels, *this);
+        choice_ = choose_builder(scene_statistics(scene_, flat_, double(sample_frame_.width) / double(sample_frame_.height)),
+                                 options_.frames_planned, pixels, *this);
         chosen_ = std::move(trees_.at(key(choice_.builder, choice_.toplevel)));
         trees_.clear();
     }

@@ -10,6 +10,7 @@
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
+#include <array>
 #include <filesystem>
 #include <map>
 #include <set>
@@ -424,6 +425,7 @@ TEST_CASE("auto measures the predicted best first unless its extra build exceeds
     // build cheaper by far less than that; binned is measured first, and it wins.
     SceneStatistics scan;
     scan.triangles = scan.unique_triangles = 34594, scan.box_excess = 1.9, scan.reducible_cover = 2.0, scan.box_fill = 0.3;
+    scan.projected_area = 0.36;
     const std::vector<CandidateEstimate> scan_prior = prior_estimates(scan, 1, kPixels);
     REQUIRE(scan_prior.front().builder == "binned");
     FixedCosts scanner = prior_costs(scan, 1, kPixels);
@@ -472,11 +474,67 @@ TEST_CASE("auto measures the predicted best first unless its extra build exceeds
     CHECK(choice.time_to_image_ms == Approx(builds + samples_ms(choice) + kFrames * winner->frame_ms));
 }
 
+// A scene of axis-aligned quads facing a camera at the origin that looks down -z with a 90-degree field of view,
+// each quad spanning [x0, x1] of the image's width (-1 to 1) and all its height at depth `depth`.
+static Scene facing_quads(const std::vector<std::array<float, 3>>& quads, double aspect) {
+    Scene scene;
+    Mesh mesh;
+    for (const auto& [x0, x1, depth] : quads) {
+        const float half_width = float(aspect) * depth, z = -depth;
+        const auto base = uint32_t(mesh.positions.size());
+        for (const float y : {-depth, depth})
+            for (const float x : {x0 * half_width, x1 * half_width}) mesh.positions.push_back({x, y, z});
+        mesh.triangles.push_back({base, base + 1, base + 3});
+        mesh.triangles.push_back({base, base + 3, base + 2});
+    }
+    mesh.objects.push_back({"quads", 0, uint32_t(mesh.triangles.size())});
+    scene.meshes.push_back(std::move(mesh));
+    scene.instances.push_back({0, glm::mat4(1.0f)});
+    scene.camera = Camera{{0, 0, 0}, {0, 0, -1}, {0, 1, 0}, 90.0f};
+    return scene;
+}
+
+TEST_CASE("projected area is the image's share the triangles cover, times their depth complexity", "[auto]") {
+    constexpr double kAspect = 16.0 / 9.0;
+    const auto projected = [&](const std::vector<std::array<float, 3>>& quads) {
+        const Scene scene = facing_quads(quads, kAspect);
+        return scene_statistics(scene, flatten(scene), kAspect).projected_area;
+    };
+    CHECK(projected({{-1, 1, 2}}) == Approx(1.0));                     // fills the image, at any depth
+    CHECK(projected({{-1, 1, 1e4f}}) == Approx(1.0));
+    CHECK(projected({{-1, 0, 3}}) == Approx(0.5));                     // its left half
+    CHECK(projected({{-1, 1, 2}, {-1, 1, 5}}) == Approx(2.0));         // two layers: depth complexity 2
+    CHECK(projected({{-1, 1, -2}}) == 0.0);                            // behind the camera
+    CHECK(projected({{1.5f, 2.5f, 2}}) == 0.0);                        // right of the view
+}
+
+TEST_CASE("auto expects an object's frame to cost by the share of the image it covers", "[auto]") {
+    // A ship seen from outside, 99 k triangles on 9% of a one-frame image: its frame is cheap, so lbvh's cheaper build
+    // is predicted to pay more than binned's tree saves, and lbvh is measured first. The same scan covering 73% of
+    // the image (as the dragon does) is predicted to trace long enough for binned's tree to pay for its build.
+    SceneStatistics ship;
+    ship.triangles = ship.unique_triangles = 99160, ship.box_excess = 1.6, ship.reducible_cover = 2.0, ship.box_fill = 0.35;
+    ship.projected_area = 0.09;
+    CHECK(prior_estimates(ship, 1, kPixels).front().builder == "lbvh");
+    FixedCosts machine = prior_costs(ship, 1, kPixels);
+    CHECK(choose_builder(ship, 1, kPixels, machine).builder == "lbvh");
+    CHECK(machine.built.front() == "lbvh");
+    SceneStatistics covering = ship;
+    covering.projected_area = 0.73;
+    CHECK(prior_estimates(covering, 1, kPixels).front().builder == "binned");
+    // Past the largest area the per-pixel cost was fitted on, it does not grow further.
+    SceneStatistics deep = ship, deeper = ship;
+    deep.projected_area = 2.1, deeper.projected_area = 40.0;
+    CHECK(prior_estimates(deep, 1, kPixels).front().frame_ms == Approx(prior_estimates(deeper, 1, kPixels).front().frame_ms));
+}
+
 TEST_CASE("auto weighs a sample's reading against the priors by the sample's length", "[auto]") {
-    // A small scan planned for one frame, traced through one pixel in a thousand: lbvh's sample reads its frame at
-    // 0.9x binned's, where the priors expect 1.09x. Every candidate but bittner fits the calibration budget.
+    // A small scan filling the image (its front and back faces: projected area 1.6) planned for one frame, traced
+    // through one pixel in a thousand: lbvh's sample reads its frame at 0.9x binned's, where the priors expect 1.09x.
+    // Every candidate but bittner fits the calibration budget.
     SceneStatistics scan;
     scan.triangles = scan.unique_triangles = 3732, scan.box_excess = 2.05, scan.reducible_cover = 2.0, scan.box_fill = 0.35;
+    scan.projected_area = 1.6;
     const auto choose = [&](uint64_t pixels) {
         FixedCosts machine = prior_costs(scan, 1, pixels);
         machine.costs["lbvh"].frame_ms = 0.9 * machine.costs["binned"].frame_ms;
@@ -572,7 +630,7 @@ TEST_CASE("auto splits where splitting pays on this machine, not where the stati
 
 TEST_CASE("auto expects esc to lead where slivers cross the scene, and sbvh where they cluster", "[auto]") {
     const auto fastest_frame = [](const Scene& scene) {
-        const std::vector<CandidateEstimate> candidates = prior_estimates(scene_statistics(scene, flatten(scene)), 256, kPixels);
+        const std::vector<CandidateEstimate> candidates = prior_estimates(scene_statistics(scene, flatten(scene), 4.0 / 3.0), 256, kPixels);
         return std::min_element(candidates.begin(), candidates.end(), [](const CandidateEstimate& a, const CandidateEstimate& b) {
                    return a.frame_ms < b.frame_ms;
                })->builder;
@@ -594,8 +652,8 @@ TEST_CASE("auto measures esc only where its automatic SA_max splits", "[auto]") 
     CHECK(has_esc(stats));
     // The statistics' fill is the one esc's rule reads: generated slivers split, a generated room does not.
     const Scene foliage = load_scene("gen:foliage?tris=3000&seed=2"), room = load_scene("gen:room?tris=3000&seed=2");
-    CHECK(scene_statistics(foliage, flatten(foliage)).box_fill < kEscMaxFillToSplit);
-    CHECK(scene_statistics(room, flatten(room)).box_fill > kEscMaxFillToSplit);
+    CHECK(scene_statistics(foliage, flatten(foliage), 4.0 / 3.0).box_fill < kEscMaxFillToSplit);
+    CHECK(scene_statistics(room, flatten(room), 4.0 / 3.0).box_fill > kEscMaxFillToSplit);
     const FlatScene flat = flatten(foliage);
     CHECK(std::isfinite(automatic_sa_max(flat.triangles, make_prim_refs(flat.triangles))));
 }
