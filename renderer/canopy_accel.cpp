@@ -200,6 +200,12 @@ public:
         release();
         if (!two_level_input_) refs_ = make_prim_refs(scene_.triangles);
     }
+    // prepare() with the scene's PrimRefs made by the caller (make_prim_refs of this scene's triangles); flat only.
+    void prepare(std::vector<PrimRef>&& refs) {
+        if (two_level_input_) throw std::logic_error("PrimRefs handed to a two-level build");
+        release();
+        refs_ = std::move(refs);
+    }
 
     // Frees the previous build. prepare() does it untimed, as the Embree rows release their previous scene in
     // theirs: freeing tens of MB is no part of building.
@@ -389,7 +395,8 @@ private:
 
 // `--builder auto`: each build computes the scene statistics and runs the calibration (renderer/auto_builder.h),
 // which builds candidates and traces the planned frame's sample pixels through them; the winner's tree is the one
-// the calibration built. All of it is timed, including every candidate's PrimRefs, which other rows prepare untimed.
+// the calibration built. All of it is timed but the first flat candidate's PrimRefs, which prepare() makes untimed,
+// as every other row's; the next candidates make theirs inside their timed builds.
 class AutoAccelerator final : public Accelerator, private Calibration {
 public:
     AutoAccelerator(const Scene& scene, const FlatScene& flat, const CanopyOptions& options)
@@ -419,7 +426,10 @@ public:
     const AutoChoice* auto_choice() const override { return chosen_ ? &choice_ : nullptr; }
     int frames_planned() const override { return options_.frames_planned; }
 
-    void prepare() override { chosen_.reset(); }
+    void prepare() override {
+        chosen_.reset();
+        refs_ = make_prim_refs(flat_.triangles);
+    }
 
     void build() override {
         warmed_up_ = false;
@@ -458,7 +468,12 @@ private:
         options.builder = builder, options.toplevel = toplevel, options.start.clear();
         const auto start = std::chrono::steady_clock::now();
         auto tree = std::make_unique<CanopyAccelerator>(&scene_, flat_, options);
-        tree->prepare();
+        if (toplevel == "flat" && !refs_.empty()) {
+            tree->prepare(std::move(refs_));
+            refs_.clear();
+        } else {
+            tree->prepare();
+        }
         tree->build();
         const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
         last_ = tree.get();
@@ -515,6 +530,7 @@ private:
     bool warmed_up_ = false;      // this build's calibration has traced its untimed warm-up
     double min_sample_ms_ = 0.0;  // a shorter sample is traced again with more tiles (next_sample_stride)
     Image scratch_;               // the samples' radiance, which nothing reads
+    std::vector<PrimRef> refs_;   // made by prepare(), untimed, for the first flat candidate
     AutoChoice choice_;
     std::map<std::string, std::unique_ptr<CanopyAccelerator>> trees_;  // the calibration's trees still wanted
     const CanopyAccelerator* last_ = nullptr;
