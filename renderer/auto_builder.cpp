@@ -36,10 +36,12 @@ constexpr size_t kProjectedSample = 1u << 20;
 
 // A triangle of area A and normal n whose centroid lies at d from the eye, depth z = d.forward, covers A |n.d| / z^3
 // of the image plane at unit distance (its solid angle A |n.d| / |d|^3 over the plane's cos^3 at that direction);
-// only the triangles whose centroid the view contains count. Over the plane's area 4 tan^2(fov / 2) x aspect.
+// only the triangles whose centroid the view contains count. Over the plane's area 4 tan^2(fov / 2) x aspect. In
+// doubles: A |n.d| / z^3 goes as the coordinates' cube, beyond float range at 1e13, or below it at 1e-13.
 double projected_area(std::span<const Triangle> triangles, const Camera& camera, double aspect) {
-    const Vec3 forward = glm::normalize(camera.target - camera.eye);
-    const Vec3 right = glm::normalize(glm::cross(forward, camera.up)), up = glm::cross(right, forward);
+    using D = glm::dvec3;
+    const D eye(camera.eye), forward = glm::normalize(D(camera.target) - eye);
+    const D right = glm::normalize(glm::cross(forward, D(camera.up))), up = glm::cross(right, forward);
     const double tan_half_fov = std::tan(0.5 * double(camera.fov_deg) * std::numbers::pi / 180.0);
     const size_t stride = std::max<size_t>(1, triangles.size() / kProjectedSample);
     const double sum = parallel::reduce(
@@ -48,13 +50,14 @@ double projected_area(std::span<const Triangle> triangles, const Camera& camera,
             double partial = 0.0;
             for (size_t i = begin; i < end; ++i) {
                 const Triangle& t = triangles[i * stride];
-                const Vec3 d = (t.v0 + t.v1 + t.v2) / 3.0f - camera.eye;
+                const D v0(t.v0), v1(t.v1), v2(t.v2);
+                const D d = (v0 + v1 + v2) / 3.0 - eye;
                 const double z = glm::dot(d, forward);
                 if (!(z > 0.0) || std::fabs(glm::dot(d, right)) > z * tan_half_fov * aspect ||
                     std::fabs(glm::dot(d, up)) > z * tan_half_fov)
                     continue;
-                const Vec3 half_normal = 0.5f * glm::cross(t.v1 - t.v0, t.v2 - t.v0);
-                partial += std::fabs(double(glm::dot(half_normal, d))) / (z * z * z);
+                const D half_normal = 0.5 * glm::cross(v1 - v0, v2 - v0);
+                partial += std::fabs(glm::dot(half_normal, d)) / (z * z * z);
             }
             return partial;
         },
@@ -406,9 +409,9 @@ uint32_t next_sample_stride(uint32_t stride, double sample_ms, double min_ms) {
 }
 
 double expected_sample_cost_ms(double frame_ms, uint32_t stride, double min_ms) {
-    const double first = frame_ms / double(std::max(stride, 1u));
-    if (first >= min_ms || stride <= 1) return first;
-    return first + std::min(frame_ms, std::max(kSampleAim * min_ms, 2.0 * first));
+    const double warm_up = frame_ms / kTreeWarmUpStride, first = frame_ms / double(std::max(stride, 1u));
+    if (first >= min_ms || stride <= 1) return warm_up + first;
+    return warm_up + first + std::min(frame_ms, std::max(kSampleAim * min_ms, 2.0 * first));
 }
 
 std::string explain(const AutoChoice& choice, int frames) {

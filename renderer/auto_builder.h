@@ -110,9 +110,15 @@ double sample_weight(double timed_ms);
 // frame). Growing by a fixed 4x instead overshot: on a 29 ms frame, samples of 0.9, 3.6 and then 14.5 ms.
 constexpr double kSampleAim = 1.25;
 uint32_t next_sample_stride(uint32_t stride, double sample_ms, double min_ms);
-// What such a sample costs through a tree of `frame_ms`: one tile in `stride`, and where that is under `min_ms`,
-// the retrace next_sample_stride sizes (kSampleAim times min_ms, twice the first at least, the whole frame at most).
-// Counting the first alone, the budget took forklift's 16-frame samples (1 ms, then 6.25) for a seventh of their cost.
+// Before its sample, a tree after the calibration's first traces one tile in this many, untimed for the reading: a
+// sample of a tree just built pays the misses that bring its nodes into the caches, which a whole frame amortises.
+// Unwarmed, sbvh's one-frame samples of sibenik read 1.05x binned's frame where its frames take 0.92x; warmed,
+// 0.92x to 0.98x (three runs each). The first tree's warm-up is half its sample, which also wakes the threads.
+constexpr uint32_t kTreeWarmUpStride = 256;
+// What such a sample costs through a tree of `frame_ms` (not the first): its warm-up, one tile in `stride`, and where
+// that is under `min_ms`, the retrace next_sample_stride sizes (kSampleAim times min_ms, twice the first at least,
+// the whole frame at most). Counting the first trace alone, the budget took forklift's 16-frame samples (1 ms, then
+// 6.25) for a seventh of their cost.
 double expected_sample_cost_ms(double frame_ms, uint32_t stride, double min_ms);
 
 // sbvh's frame relative to binned's on a scene without slivers whose binned tree has this sibling overlap.

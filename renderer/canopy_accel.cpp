@@ -484,10 +484,12 @@ private:
     SampleReading sample_frame() override {
         const PinholeCamera camera(scene_camera(scene_, flat_), sample_frame_.width, sample_frame_.height);
         const double pixels = double(sample_frame_.width) * double(sample_frame_.height);
-        // Half a sample first, untimed, through the first tree: the first sample after waking the threads took 1.3x
-        // to 1.6x the next ones through the same tree (gen:foliage, esc).
+        // An untimed warm-up first: through the first tree half a sample, as the first sample after waking the
+        // threads took 1.3x to 1.6x the next ones through the same tree (gen:foliage, esc); through each later tree,
+        // one tile in kTreeWarmUpStride, which brings its nodes into the caches.
         const auto warm_up = std::chrono::steady_clock::now();
-        if (!warmed_up_) trace_sample(camera, stride_ * 2), warmed_up_ = true;
+        trace_sample(camera, warmed_up_ ? kTreeWarmUpStride : stride_ * 2);
+        warmed_up_ = true;
         for (uint32_t stride = stride_;;) {
             const auto start = std::chrono::steady_clock::now();
             trace_sample(camera, stride);

@@ -502,6 +502,8 @@ TEST_CASE("projected area is the image's share the triangles cover, times their 
     };
     CHECK(projected({{-1, 1, 2}}) == Approx(1.0));                     // fills the image, at any depth
     CHECK(projected({{-1, 1, 1e4f}}) == Approx(1.0));
+    CHECK(projected({{-1, 1, 1e11f}}) == Approx(1.0));                 // near the largest and smallest scenes
+    CHECK(projected({{-1, 1, 1e-11f}}) == Approx(1.0));                // flatten() accepts (1e12, 1e-12)
     CHECK(projected({{-1, 0, 3}}) == Approx(0.5));                     // its left half
     CHECK(projected({{-1, 1, 2}, {-1, 1, 5}}) == Approx(2.0));         // two layers: depth complexity 2
     CHECK(projected({{-1, 1, -2}}) == 0.0);                            // behind the camera
@@ -683,16 +685,18 @@ TEST_CASE("auto's explanation lists every candidate and the choice", "[auto]") {
     CHECK(text.find("TTI@16") != std::string::npos);
 }
 
-TEST_CASE("auto's budget counts a sample's retrace where the first trace is too short to time", "[auto]") {
+TEST_CASE("auto's budget counts a sample's warm-up and its retrace where the first trace is too short to time", "[auto]") {
+    // Every sample after the first tree's is preceded by a warm-up of one tile in kTreeWarmUpStride.
+    const auto warm_up = [](double frame_ms) { return frame_ms / kTreeWarmUpStride; };
     // forklift at 16 frames: a 30 ms frame, one tile in 32 (0.94 ms), then the retrace of 6.25 ms.
-    CHECK(expected_sample_cost_ms(30.0, 32, 5.0) == Approx(30.0 / 32 + kSampleAim * 5.0));
-    // A first trace long enough is all of it; so is one with no minimum (one frame planned).
-    CHECK(expected_sample_cost_ms(400.0, 32, 5.0) == Approx(12.5));
-    CHECK(expected_sample_cost_ms(30.0, 128, 0.0) == Approx(30.0 / 128));
+    CHECK(expected_sample_cost_ms(30.0, 32, 5.0) == Approx(warm_up(30.0) + 30.0 / 32 + kSampleAim * 5.0));
+    // A first trace long enough is all of it but the warm-up; so is one with no minimum (one frame planned).
+    CHECK(expected_sample_cost_ms(400.0, 32, 5.0) == Approx(warm_up(400.0) + 12.5));
+    CHECK(expected_sample_cost_ms(30.0, 128, 0.0) == Approx(warm_up(30.0) + 30.0 / 128));
     // The retrace is at least twice the first, and at most the whole frame.
-    CHECK(expected_sample_cost_ms(150.0, 32, 5.0) == Approx(3.0 * 150.0 / 32));
-    CHECK(expected_sample_cost_ms(4.0, 32, 5.0) == Approx(4.0 / 32 + 4.0));
-    CHECK(expected_sample_cost_ms(4.0, 1, 5.0) == Approx(4.0));
+    CHECK(expected_sample_cost_ms(150.0, 32, 5.0) == Approx(warm_up(150.0) + 3.0 * 150.0 / 32));
+    CHECK(expected_sample_cost_ms(4.0, 32, 5.0) == Approx(warm_up(4.0) + 4.0 / 32 + 4.0));
+    CHECK(expected_sample_cost_ms(4.0, 1, 5.0) == Approx(warm_up(4.0) + 4.0));
 }
 
 TEST_CASE("a sample too short to time is traced again with as many tiles as its rate says it needs", "[auto]") {
