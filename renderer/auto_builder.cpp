@@ -229,15 +229,12 @@ double frame_ns_per_pixel(const SceneStatistics& s) {
 double prior_frame_ms(const SceneStatistics& s, uint64_t pixels, double relative) {
     return double(pixels) * frame_ns_per_pixel(s) * 1e-6 * relative;
 }
-// Flattening copies every instance: past this many triangles (about 2 GB of flat layout) two-level only.
-constexpr uint64_t kMaxFlattenedTriangles = 16'000'000;
-
 bool allowed(const Prior& p, const SceneStatistics& stats) {
     // Where its automatic SA_max splits nothing, esc builds binned's very tree: measuring it would be waste.
     if (std::string(p.builder) == "esc" && stats.box_fill >= kEscMaxFillToSplit) return false;
     const bool two_level = std::string(p.toplevel) != "flat";
     if (two_level) return instanced(stats);  // two-level only with instances
-    return !instanced(stats) || stats.triangles <= kMaxFlattenedTriangles;
+    return flat_candidates(stats.triangles, stats.unique_triangles);
 }
 
 double geometric_mean(const std::vector<double>& ratios) {
@@ -406,6 +403,10 @@ double sample_weight(double timed_ms) {
 uint32_t next_sample_stride(uint32_t stride, double sample_ms, double min_ms) {
     const double sized = double(stride) * std::max(sample_ms, 0.0) / (kSampleAim * min_ms);
     return uint32_t(std::clamp(std::floor(sized), 1.0, std::max(1.0, double(stride / 2))));
+}
+
+bool flat_candidates(uint64_t triangles, uint64_t unique_triangles) {
+    return triangles <= unique_triangles || triangles <= kMaxFlattenedTriangles;
 }
 
 double expected_sample_cost_ms(double frame_ms, uint32_t stride, double min_ms) {

@@ -34,6 +34,11 @@ struct SceneStatistics {
     double projected_area = 1.0;
 };
 
+// Flattening copies every instance: past this many triangles (about 2 GB of flat layout) two-level only.
+constexpr uint64_t kMaxFlattenedTriangles = 16'000'000;
+// Whether auto's candidates include flat trees for a scene of `triangles` flattened, `unique_triangles` in meshes.
+bool flat_candidates(uint64_t triangles, uint64_t unique_triangles);
+
 // `image_aspect`, width over height, frames the camera's view for projected_area.
 SceneStatistics scene_statistics(const Scene& scene, const FlatScene& flat, double image_aspect);
 

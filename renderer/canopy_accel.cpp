@@ -426,9 +426,13 @@ public:
     const AutoChoice* auto_choice() const override { return chosen_ ? &choice_ : nullptr; }
     int frames_planned() const override { return options_.frames_planned; }
 
+    // PrimRefs for the first flat candidate, none where auto builds two-level trees only (a flattened scene of tens
+    // of millions of instanced triangles would hold them for nothing).
     void prepare() override {
         chosen_.reset();
-        refs_ = make_prim_refs(flat_.triangles);
+        uint64_t unique_triangles = 0;
+        for (const Mesh& mesh : scene_.meshes) unique_triangles += mesh.triangles.size();
+        refs_ = flat_candidates(flat_.triangles.size(), unique_triangles) ? make_prim_refs(flat_.triangles) : std::vector<PrimRef>{};
     }
 
     void build() override {
@@ -529,7 +533,7 @@ private:
     CanopyOptions options_;
     FrameSettings sample_frame_;  // the planned frame, traced one path at a time
     uint32_t stride_ = 1;         // the sample traces one tile in stride_
-    bool warmed_up_ = false;      // this build's calibration has traced its untimed warm-up
+    bool warmed_up_ = false;      // this build's first tree has traced its warm-up (half a sample)
     double min_sample_ms_ = 0.0;  // a shorter sample is traced again with more tiles (next_sample_stride)
     Image scratch_;               // the samples' radiance, which nothing reads
     std::vector<PrimRef> refs_;   // made by prepare(), untimed, for the first flat candidate

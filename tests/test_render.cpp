@@ -672,6 +672,10 @@ TEST_CASE("auto chooses two-level only with instances, and only two-level past t
     REQUIRE(only.size() == 1);
     CHECK(only.front().toplevel == "rebraid");
     for (const CandidateEstimate& c : prior_estimates(sponza_statistics(), 1, kPixels)) CHECK(c.toplevel == "flat");
+    // The same rule decides whether auto prepares PrimRefs for a flat candidate at all.
+    CHECK_FALSE(flat_candidates(zoo.triangles, zoo.unique_triangles));
+    CHECK(flat_candidates(64 * zoo.unique_triangles, zoo.unique_triangles));
+    CHECK(flat_candidates(2 * kMaxFlattenedTriangles, 2 * kMaxFlattenedTriangles));  // nothing instanced: flat only
 }
 
 TEST_CASE("auto's explanation lists every candidate and the choice", "[auto]") {
