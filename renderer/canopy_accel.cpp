@@ -131,7 +131,8 @@ class CanopyAccelerator final : public Accelerator {
 public:
     // `objects` is the scene whose objects and instances a two-level top level is built over; null for flat.
     CanopyAccelerator(const Scene* objects, const FlatScene& scene, const CanopyOptions& options)
-        : scene_(scene), options_(options), builder_(find_builder(options.builder)), width_(kernel_width(options.kernel)) {
+        : scene_(scene), options_(options), builder_(find_builder(options.builder)), width_(kernel_width(options.kernel)),
+          collapse_(default_collapse(options)) {
         // SAH charges a leaf one test per 4 triangles for the SIMD kernels although they test 8 at once: on
         // crytek-sponza that tree traced faster than one charged per 8 (bvh8 / Embree 1.29 against 1.36, two runs each).
         // And leaves of up to 16 triangles (two blocks) where SAH prefers them to a split: binned bvh8 built in 0.94x to
@@ -153,7 +154,7 @@ public:
             if (!objects) throw std::invalid_argument("top level '" + options.toplevel + "' needs the scene's objects");
             two_level_settings_.blas_builder = options.builder;
             two_level_settings_.blas = settings_;
-            two_level_settings_.collapse = options.collapse;
+            two_level_settings_.collapse = collapse_;
             if (!(options.rebraid_threshold >= 0.0f && options.rebraid_threshold <= 1.0f))
                 throw std::invalid_argument("rebraid threshold " + std::to_string(options.rebraid_threshold) +
                                             ": a share of the segment's extent, from 0 to 1");
@@ -178,7 +179,7 @@ public:
     // " greedy" or " direct" for a wide tree not made by the optimal collapse (at width 2 all collapses agree).
     std::string collapse_suffix() const {
         if (width_ == 2) return "";
-        switch (options_.collapse) {
+        switch (collapse_) {
             case CollapseMethod::Greedy: return " greedy";
             case CollapseMethod::Direct: return " direct";
             default: return "";
@@ -232,7 +233,7 @@ public:
             two_level_built_ = true;
             return;
         }
-        if (options_.collapse == CollapseMethod::Direct) {  // no binary tree (check_layout_options: lbvh, bvh4 or bvh8)
+        if (collapse_ == CollapseMethod::Direct) {  // no binary tree (check_layout_options: lbvh, bvh4 or bvh8)
             if (width_ == 4) build_wide_lbvh_into<4>(layout_, BuildInput{scene_.triangles, std::move(refs_)});
             else build_wide_lbvh_into<8>(layout_, BuildInput{scene_.triangles, std::move(refs_)});
         } else {
@@ -253,9 +254,9 @@ public:
     void build_binary_and_collapse() {
         binary_ = builder_.build(BuildInput{scene_.triangles, std::move(refs_)}, settings_);
         switch (width_) {
-            case 2: collapse_into<2>(layout_, binary_, scene_.triangles, options_.collapse); break;
-            case 4: collapse_into<4>(layout_, binary_, scene_.triangles, options_.collapse); break;
-            default: collapse_into<8>(layout_, binary_, scene_.triangles, options_.collapse); break;
+            case 2: collapse_into<2>(layout_, binary_, scene_.triangles, collapse_); break;
+            case 4: collapse_into<4>(layout_, binary_, scene_.triangles, collapse_); break;
+            default: collapse_into<8>(layout_, binary_, scene_.triangles, collapse_); break;
         }
     }
 
@@ -383,6 +384,7 @@ private:
     CanopyOptions options_;
     const BuilderEntry& builder_;
     const int width_;
+    const CollapseMethod collapse_;
     BuildSettings settings_;
     std::vector<PrimRef> refs_;
     Bvh binary_;
@@ -470,6 +472,7 @@ private:
     double build(const std::string& builder, const std::string& toplevel) override {
         CanopyOptions options = options_;
         options.builder = builder, options.toplevel = toplevel, options.start.clear();
+        if (!options.collapse) options.collapse = CollapseMethod::Optimal;  // the trees auto's priors were measured on
         const auto start = std::chrono::steady_clock::now();
         auto tree = std::make_unique<CanopyAccelerator>(&scene_, flat_, options);
         if (toplevel == "flat" && !refs_.empty()) {
@@ -568,6 +571,12 @@ std::unique_ptr<Accelerator> make_family_accelerator(const FlatScene& flat, cons
 }
 
 }  // namespace
+
+CollapseMethod default_collapse(const CanopyOptions& options) {
+    if (options.collapse) return *options.collapse;
+    const bool direct = options.builder == "lbvh" && options.toplevel == "flat" && kernel_width(options.kernel) > 2;
+    return direct ? CollapseMethod::Direct : CollapseMethod::Optimal;
+}
 
 void check_layout_options(const CanopyOptions& options) {
     if (options.collapse == CollapseMethod::Direct) {

@@ -238,3 +238,33 @@ TEST_CASE("the accelerator's direct collapse: lbvh's tree, flat, bvh4 or bvh8; i
     }
     CHECK_THROWS_AS(collapse<8>(Bvh{}, flat.triangles, CollapseMethod::Direct), std::invalid_argument);
 }
+
+TEST_CASE("lbvh's flat wide trees are direct unless a collapse is asked for; other trees take the optimal collapse", "[builders][direct]") {
+    const FlatScene flat = flatten(load_scene("gen:box?tris=500&seed=2"));
+    const auto collapse_of = [](const char* builder, const char* kernel, std::optional<CollapseMethod> collapse = {},
+                                const char* toplevel = "flat") {
+        CanopyOptions options{builder, "", kernel};
+        options.toplevel = toplevel, options.collapse = collapse;
+        return default_collapse(options);
+    };
+    CHECK(collapse_of("lbvh", "bvh8") == CollapseMethod::Direct);
+    CHECK(collapse_of("lbvh", "bvh4") == CollapseMethod::Direct);
+    CHECK(collapse_of("lbvh", "bvh2") == CollapseMethod::Optimal);
+    CHECK(collapse_of("lbvh", "bvh8", {}, "two-level") == CollapseMethod::Optimal);
+    CHECK(collapse_of("lbvh", "bvh8", CollapseMethod::Optimal) == CollapseMethod::Optimal);
+    CHECK(collapse_of("lbvh", "bvh8", CollapseMethod::Greedy) == CollapseMethod::Greedy);
+    CHECK(collapse_of("binned", "bvh8") == CollapseMethod::Optimal);
+    CHECK(collapse_of("bittner", "bvh8") == CollapseMethod::Optimal);  // its start tree is lbvh's binary tree
+    if (!kernel_compiled(8) || !cpu_runs(8)) return;
+    // The accelerator builds what default_collapse says and names it.
+    for (const auto& [collapse, name] : {std::pair{std::optional<CollapseMethod>{}, "bvh8 direct"},
+                                         std::pair{std::optional{CollapseMethod::Optimal}, "bvh8"}}) {
+        CanopyOptions options{"lbvh", "", "bvh8"};
+        options.collapse = collapse;
+        const auto accel = make_canopy_accelerator(flat, options);
+        accel->prepare();
+        accel->build();
+        CHECK(accel->kernel() == name);
+        CHECK(accel->report(false).sah.has_value() == collapse.has_value());  // the direct tree has no binary tree
+    }
+}

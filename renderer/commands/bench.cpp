@@ -168,7 +168,7 @@ std::vector<Entry> make_entries(const Scene& scene, const FlatScene& flat, const
                                 continue;
                             CanopyOptions options{builder, optimiser_start(builder, o.start), kernel,
                                                   traversal == "robust", intersector == "watertight", toplevel};
-                            options.collapse = parse_collapse_method(collapse);
+                            if (!collapse.empty()) options.collapse = parse_collapse_method(collapse);
                             options.layout = parse_node_layout(layout);
                             if (builder != "auto") {
                                 for (const float threshold : rebraid_thresholds_of(toplevel, o))

@@ -23,7 +23,7 @@ struct BenchOptions {
     std::vector<std::string> blas_builders;  // object BVH builders of the two-level rows; empty: `builders`
     std::vector<std::string> traversals{"robust"};      // robust, fast
     std::vector<std::string> intersectors{"watertight"};  // watertight, moller
-    std::vector<std::string> collapses{"optimal"};        // optimal, greedy
+    std::vector<std::string> collapses{""};  // optimal, greedy, direct; "": the builder's own
     std::vector<std::string> layouts{"standard"};         // standard, compressed (bvh8)
     std::vector<std::string> embree_qualities;  // empty: no Embree rows
     std::vector<std::string> tracers{"single"};  // single, stream: a row each per accelerator, built once

@@ -95,7 +95,7 @@ void prepare_render(RenderOptions& o, PreparedRender& p) {
     CanopyOptions options{o.builder, o.start, o.kernel, o.traversal == "robust", o.intersector == "watertight", o.toplevel,
                           o.frames_planned ? o.frames_planned : o.spp};
     options.planned_frame = frame_settings(o);
-    options.collapse = parse_collapse_method(o.collapse);
+    if (!o.collapse.empty()) options.collapse = parse_collapse_method(o.collapse);
     options.layout = parse_node_layout(o.layout);
     if (options.layout == NodeLayout::Compressed && o.tracer == "stream")
         throw std::invalid_argument("--layout compressed: the single-ray tracer only, not --tracer stream");

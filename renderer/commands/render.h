@@ -21,7 +21,7 @@ struct RenderOptions {
     int spp = 1, threads = 0, bounces = 8;
     std::vector<int> size{1024, 768};
     bool material_albedo = false, heatmap = false;
-    std::string traversal = "robust", intersector = "watertight", collapse = "optimal";
+    std::string traversal = "robust", intersector = "watertight", collapse;  // collapse: empty for the builder's own
     std::string layout = "standard";     // bvh8 nodes: standard (floats) or compressed (8-bit planes)
     std::string tracer = "single";       // single (one path at a time) or stream (wavefront, sorted ray batches)
     uint32_t stream_paths = 1u << 18;    // stream: paths in flight per batch

@@ -341,9 +341,11 @@ nlohmann::json row_json(const Row& r) {
             {"unpermuted_simd_ns_per_ray", r.unpermuted_ns}};
 }
 
-// The study reproduces the quality-metrics paper (Aila, Karras and Laine 2013): its SBVH at the paper's alpha.
+// The study reproduces the quality-metrics paper (Aila, Karras and Laine 2013): its SBVH at the paper's alpha, and
+// every builder's binary tree, whose metrics it measures, collapsed (lbvh's too, whose default has no binary tree).
 CanopyOptions study_options(const std::string& builder, const std::string& kernel) {
     CanopyOptions options{builder, "", kernel};
+    options.collapse = CollapseMethod::Optimal;
     if (builder == "sbvh") options.sbvh_alpha = kPapersSbvhAlpha;
     return options;
 }
