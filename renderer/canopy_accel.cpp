@@ -472,7 +472,6 @@ private:
     double build(const std::string& builder, const std::string& toplevel) override {
         CanopyOptions options = options_;
         options.builder = builder, options.toplevel = toplevel, options.start.clear();
-        if (!options.collapse) options.collapse = CollapseMethod::Optimal;  // the trees auto's priors were measured on
         const auto start = std::chrono::steady_clock::now();
         auto tree = std::make_unique<CanopyAccelerator>(&scene_, flat_, options);
         if (toplevel == "flat" && !refs_.empty()) {

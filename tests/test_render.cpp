@@ -421,15 +421,15 @@ double samples_ms(const AutoChoice& choice) {
 }
 
 TEST_CASE("auto measures the predicted best first unless its extra build exceeds what it is predicted to save", "[auto]") {
-    // A small scan seen from outside, planned for one frame: binned is predicted best, lbvh's frame 9% slower for a
+    // A small scan seen from outside, planned for 16 frames: binned is predicted best, lbvh's frames 12% slower for a
     // build cheaper by far less than that; binned is measured first, and it wins.
     SceneStatistics scan;
     scan.triangles = scan.unique_triangles = 34594, scan.box_excess = 1.9, scan.reducible_cover = 2.0, scan.box_fill = 0.3;
     scan.projected_area = 0.36;
-    const std::vector<CandidateEstimate> scan_prior = prior_estimates(scan, 1, kPixels);
+    const std::vector<CandidateEstimate> scan_prior = prior_estimates(scan, 16, kPixels);
     REQUIRE(scan_prior.front().builder == "binned");
-    FixedCosts scanner = prior_costs(scan, 1, kPixels);
-    CHECK(choose_builder(scan, 1, kPixels, scanner).builder == "binned");
+    FixedCosts scanner = prior_costs(scan, 16, kPixels);
+    CHECK(choose_builder(scan, 16, kPixels, scanner).builder == "binned");
     CHECK(scanner.built.front() == "binned");
     // A room planned for 20 frames: bittner is predicted best, by less than its build costs over binned's, the cheapest
     // build predicted within 10% of it, which is measured first.
