@@ -111,7 +111,8 @@ struct Rays {
 
 std::unique_ptr<canopy::Accel> make_accel(const py::object& vertices, const py::object& triangles, const std::string& builder,
                                           const std::string& kernel, bool robust, bool watertight, int threads,
-                                          const py::object& instances, const std::string& toplevel, const std::string& layout) {
+                                          const py::object& instances, const std::string& toplevel, const std::string& layout,
+                                          const std::string& collapse) {
     const auto v = float_array(vertices, "vertices");
     const py::array t = index_array(triangles, "triangles", size_t(v.shape(0)));
     const canopy::MeshArrays mesh{floats(v), {static_cast<const uint32_t*>(t.data()), size_t(t.size())}};
@@ -121,7 +122,7 @@ std::unique_ptr<canopy::Accel> make_accel(const py::object& vertices, const py::
         placed.resize(transforms.shape(0));
         for (size_t i = 0; i < placed.size(); ++i) std::memcpy(placed[i].transform.data(), transforms.data(i), 12 * sizeof(float));
     }
-    const canopy::AccelOptions options{builder, kernel, robust, watertight, toplevel, threads, layout};
+    const canopy::AccelOptions options{builder, kernel, robust, watertight, toplevel, threads, layout, collapse};
     py::gil_scoped_release unlocked;
     return std::make_unique<canopy::Accel>(std::span(&mesh, 1), placed, options);
 }
@@ -183,12 +184,14 @@ PYBIND11_MODULE(canopy, m) {
     py::class_<canopy::Accel>(m, "Accel", "A BVH over triangles, built once, then queried with batches of rays.")
         .def(py::init(&make_accel), "vertices"_a, "triangles"_a, py::kw_only(), "builder"_a = "auto", "kernel"_a = "auto",
              "robust"_a = true, "watertight"_a = true, "threads"_a = 0, "instances"_a = py::none(), "toplevel"_a = "flat",
-             "layout"_a = "standard",
+             "layout"_a = "standard", "collapse"_a = "",
              "vertices: (n, 3) float32; triangles: (m, 3) uint32 or other integers; builder: a name of builders() or "
              "'auto'; kernel: 'bvh2', 'bvh4', 'bvh8' or 'auto'; threads: 0 for all; instances: None, or (k, 3, 4) "
              "row-major transforms each placing the mesh (hits then name the instance); toplevel: how instances are "
              "built, 'flat', 'two-level' or 'rebraid'; layout: bvh8 nodes, 'standard' or 'compressed' (half the node "
-             "bytes, the same hits; a named builder, kernel 'bvh8', toplevel 'flat').")
+             "bytes, the same hits; a named builder, kernel 'bvh8', toplevel 'flat'); collapse: how bvh4 and bvh8 are made, "
+             "'' for the builder's own (lbvh: 'direct', straight from its Morton codes; others: 'optimal'), 'optimal', "
+             "'greedy' or 'direct' (lbvh only).")
         .def("intersect", &intersect, "origins"_a, "directions"_a, "tmin"_a = 0.0f, "tmax"_a = canopy::kInfinity,
              py::kw_only(), "with_instance"_a = false,
              "Closest hits of (n, 3) origins and directions in (tmin, tmax] (numbers, or one a ray): arrays t, triangle, "

@@ -90,6 +90,25 @@ TEST_CASE("api: compressed nodes find the standard layout's hits, at the same di
     CHECK(compressed.stats().bytes < standard.stats().bytes);
 }
 
+TEST_CASE("api: lbvh's default is the direct wide tree, the optimal collapse on request, with the same distances", "[api]") {
+    const canopy::TriangleMesh mesh = canopy::load_triangles("gen:box?tris=3000&seed=5");
+    const Rays rays = random_rays(5000, 6);
+    const canopy::Accel direct(arrays(mesh), {.builder = "lbvh", .kernel = "bvh8"});
+    const canopy::Accel collapsed(arrays(mesh), {.builder = "lbvh", .kernel = "bvh8", .collapse = "optimal"});
+    const std::vector<canopy::RayHit> expected = batch_hits(collapsed, rays), actual = batch_hits(direct, rays);
+    size_t found = 0;
+    for (size_t i = 0; i < rays.count(); ++i) {
+        REQUIRE(std::bit_cast<uint32_t>(actual[i].t) == std::bit_cast<uint32_t>(expected[i].t));
+        found += actual[i].found();
+    }
+    REQUIRE(found > rays.count() / 4);
+    CHECK(direct.stats().kernel == "bvh8 direct");
+    CHECK_FALSE(direct.stats().sah);  // no binary tree
+    CHECK(collapsed.stats().kernel == "bvh8");
+    CHECK(*collapsed.stats().sah > 0);
+    CHECK(canopy::Accel(arrays(mesh), {.builder = "lbvh", .kernel = "bvh2"}).stats().kernel == "bvh2");
+}
+
 TEST_CASE("api: one thread and all threads give the same tree and hits", "[api]") {
     const canopy::TriangleMesh mesh = canopy::load_triangles("gen:cylinders?tris=4000&seed=2");
     const Rays rays = random_rays(3000, 2);
@@ -195,6 +214,11 @@ TEST_CASE("api: bad input throws std::invalid_argument naming the argument", "[a
     REQUIRE_THROWS_WITH(build(vertices, triangles, {.threads = -2}), Contains("threads: -2"));
     REQUIRE_THROWS_WITH(build(vertices, triangles, {.builder = "binned", .layout = "tiny"}), Contains("layout: unknown layout 'tiny'"));
     REQUIRE_THROWS_WITH(build(vertices, triangles, {.layout = "compressed"}), Contains("layout: compressed nodes take a named BVH builder, kernel bvh8 and a flat top level, not builder 'auto'"));
+    REQUIRE_THROWS_WITH(build(vertices, triangles, {.builder = "lbvh", .collapse = "zigzag"}), Contains("collapse: unknown collapse 'zigzag'"));
+    REQUIRE_THROWS_WITH(build(vertices, triangles, {.builder = "binned", .layout = "compressed", .collapse = "direct"}),
+                        Contains("collapse: collapse 'direct' is lbvh's wide tree"));
+    REQUIRE_THROWS_WITH(build(vertices, triangles, {.builder = "lbvh", .kernel = "bvh2", .collapse = "direct"}),
+                        Contains("collapse: collapse 'direct' is lbvh's wide tree"));
 
     const std::vector<canopy::MeshArrays> meshes{{vertices, triangles}};
     REQUIRE_THROWS_WITH(canopy::Accel(meshes, std::vector<canopy::MeshInstance>{{1}}), Contains("instances[0].mesh: 1 is out of range (1 meshes)"));

@@ -186,6 +186,15 @@ def test_compressed_nodes_find_the_same_distances(scene):
     assert compressed.stats()["bytes"] < standard.stats()["bytes"]
 
 
+def test_lbvh_builds_the_direct_tree_unless_asked_to_collapse(scene):
+    vertices, triangles, origins, directions, _ = scene
+    direct = canopy.Accel(vertices, triangles, builder="lbvh", kernel="bvh8")
+    collapsed = canopy.Accel(vertices, triangles, builder="lbvh", kernel="bvh8", collapse="optimal")
+    assert direct.stats()["kernel"] == "bvh8 direct" and direct.stats()["sah"] is None
+    assert collapsed.stats()["kernel"] == "bvh8" and collapsed.stats()["sah"] > 0
+    assert np.array_equal(direct.intersect(origins, directions)[0], collapsed.intersect(origins, directions)[0])
+
+
 def test_one_thread_and_all_threads_agree(scene):
     vertices, triangles, origins, directions, _ = scene
     one = canopy.Accel(vertices, triangles, builder="ploc", threads=1).intersect(origins, directions)
@@ -258,6 +267,8 @@ BAD_BUILDS = [
     ({"toplevel": "rebraid"}, "toplevel: builder 'auto' chooses"),
     ({"threads": -1}, "threads: -1"),
     ({"layout": "tiny", "builder": "binned"}, "layout: unknown layout 'tiny'"),
+    ({"collapse": "zigzag", "builder": "lbvh"}, "collapse: unknown collapse 'zigzag'"),
+    ({"collapse": "direct", "builder": "binned"}, "collapse: collapse 'direct' is lbvh's wide tree"),
     ({"layout": "compressed", "builder": "binned", "kernel": "bvh4"}, "layout: compressed nodes take a named BVH builder, kernel bvh8 and a flat top level, not kernel bvh4"),
     ({"instances": np.zeros((2, 4, 4), np.float32)}, r"instances: shape \(2, 4, 4\), expected \(n, 3, 4\)"),
     ({"instances": np.zeros((0, 3, 4), np.float32)}, "instances: empty"),
