@@ -117,13 +117,9 @@ CanopyOptions engine_options(const AccelOptions& options) {
     engine.robust = options.robust;
     engine.watertight = options.watertight;
     engine.toplevel = options.toplevel;
-    if (!options.collapse.empty()) {
-        engine.collapse = naming("collapse", [&] { return parse_collapse_method(options.collapse); });
-        CanopyOptions standard = engine;  // the collapse checked alone, so an error names it
-        standard.layout = NodeLayout::Standard;
-        naming("collapse", [&] { check_layout_options(standard); });
-    }
-    naming("layout", [&] { check_layout_options(engine); });
+    if (!options.collapse.empty()) engine.collapse = naming("collapse", [&] { return parse_collapse_method(options.collapse); });
+    naming("collapse", [&] { check_collapse_options(engine); });
+    naming("layout", [&] { check_node_layout_options(engine); });
     return engine;
 }
 

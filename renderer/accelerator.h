@@ -88,7 +88,7 @@ struct CanopyOptions {
     // sample pixels its calibration traces (single-ray tracer) with the scene's camera.
     int frames_planned = 16;
     FrameSettings planned_frame;
-    // How bvh4 and bvh8 are made; unset, the builder's own (default_collapse): lbvh's flat wide trees come straight
+    // How bvh4 and bvh8 are made; unset, the builder's own (collapse_of): lbvh's flat wide trees come straight
     // from its Morton codes (CollapseMethod::Direct), every other tree from the optimal collapse of its binary tree.
     std::optional<CollapseMethod> collapse;
     NodeLayout layout = NodeLayout::Standard;           // bvh8 nodes as floats, or quantised to bytes
@@ -106,10 +106,12 @@ std::unique_ptr<Accelerator> make_canopy_accelerator(const FlatScene& scene, con
 // The collapse a tree of these options is made with: the one asked for, else the builder's own. lbvh is the
 // builder for the fastest build, and its direct wide tree builds in 0.4x the time of its binary tree and that
 // tree's optimal collapse, for frames 1.0x to 1.2x as long (docs/results.md, lbvh's direct wide tree).
-CollapseMethod default_collapse(const CanopyOptions& options);
-// Throws std::invalid_argument for a layout or collapse the options' builder, kernel or top level cannot take
-// (compressed nodes: a named BVH builder, bvh8, flat; the direct collapse: lbvh, bvh4 or bvh8, flat); both
-// make_canopy_accelerator overloads check it.
+CollapseMethod collapse_of(const CanopyOptions& options);
+// Throw std::invalid_argument for a collapse (direct: lbvh, bvh4 or bvh8, flat) or a node layout (compressed: a
+// named BVH builder, bvh8, flat) the options' builder, kernel or top level cannot take; check_layout_options does
+// both, as both make_canopy_accelerator overloads do.
+void check_collapse_options(const CanopyOptions& options);
+void check_node_layout_options(const CanopyOptions& options);
 void check_layout_options(const CanopyOptions& options);
 // Any top level: `flat` must be flatten(scene).
 std::unique_ptr<Accelerator> make_canopy_accelerator(const Scene& scene, const FlatScene& flat, const CanopyOptions& options);

@@ -132,7 +132,7 @@ public:
     // `objects` is the scene whose objects and instances a two-level top level is built over; null for flat.
     CanopyAccelerator(const Scene* objects, const FlatScene& scene, const CanopyOptions& options)
         : scene_(scene), options_(options), builder_(find_builder(options.builder)), width_(kernel_width(options.kernel)),
-          collapse_(default_collapse(options)) {
+          collapse_(collapse_of(options)) {
         // SAH charges a leaf one test per 4 triangles for the SIMD kernels although they test 8 at once: on
         // crytek-sponza that tree traced faster than one charged per 8 (bvh8 / Embree 1.29 against 1.36, two runs each).
         // And leaves of up to 16 triangles (two blocks) where SAH prefers them to a split: binned bvh8 built in 0.94x to
@@ -432,9 +432,8 @@ public:
     // of millions of instanced triangles would hold them for nothing).
     void prepare() override {
         chosen_.reset();
-        uint64_t unique_triangles = 0;
-        for (const Mesh& mesh : scene_.meshes) unique_triangles += mesh.triangles.size();
-        refs_ = flat_candidates(flat_.triangles.size(), unique_triangles) ? make_prim_refs(flat_.triangles) : std::vector<PrimRef>{};
+        const bool flat = flat_candidates(flat_.triangles.size(), scene_size(scene_).triangles);
+        refs_ = flat ? make_prim_refs(flat_.triangles) : std::vector<PrimRef>{};
     }
 
     void build() override {
@@ -571,22 +570,24 @@ std::unique_ptr<Accelerator> make_family_accelerator(const FlatScene& flat, cons
 
 }  // namespace
 
-CollapseMethod default_collapse(const CanopyOptions& options) {
+CollapseMethod collapse_of(const CanopyOptions& options) {
     if (options.collapse) return *options.collapse;
     const bool direct = options.builder == "lbvh" && options.toplevel == "flat" && kernel_width(options.kernel) > 2;
     return direct ? CollapseMethod::Direct : CollapseMethod::Optimal;
 }
 
-void check_layout_options(const CanopyOptions& options) {
-    if (options.collapse == CollapseMethod::Direct) {
-        const auto refuse = [](const std::string& what) {
-            throw std::invalid_argument("collapse 'direct' is lbvh's wide tree from its Morton codes: builder lbvh, kernel bvh4 or bvh8 "
-                                        "and a flat top level, not " + what);
-        };
-        if (options.builder != "lbvh") refuse("builder '" + options.builder + "'");
-        if (const int width = kernel_width(options.kernel); width == 2) refuse("kernel " + kernel_name(width));
-        if (options.toplevel != "flat") refuse("top level '" + options.toplevel + "'");
-    }
+void check_collapse_options(const CanopyOptions& options) {
+    if (options.collapse != CollapseMethod::Direct) return;
+    const auto refuse = [](const std::string& what) {
+        throw std::invalid_argument("collapse 'direct' is lbvh's wide tree from its Morton codes: builder lbvh, kernel bvh4 or bvh8 "
+                                    "and a flat top level, not " + what);
+    };
+    if (options.builder != "lbvh") refuse("builder '" + options.builder + "'");
+    if (const int width = kernel_width(options.kernel); width == 2) refuse("kernel " + kernel_name(width));
+    if (options.toplevel != "flat") refuse("top level '" + options.toplevel + "'");
+}
+
+void check_node_layout_options(const CanopyOptions& options) {
     if (options.layout != NodeLayout::Compressed) return;
     const auto refuse = [](const std::string& what) {
         throw std::invalid_argument("compressed nodes take a named BVH builder, kernel bvh8 and a flat top level, not " + what);
@@ -596,6 +597,11 @@ void check_layout_options(const CanopyOptions& options) {
     if (options.builder == "auto" || family) refuse("builder '" + options.builder + "'");
     if (const int width = kernel_width(options.kernel); width != 8) refuse("kernel " + kernel_name(width));
     if (options.toplevel != "flat") refuse("top level '" + options.toplevel + "'");
+}
+
+void check_layout_options(const CanopyOptions& options) {
+    check_collapse_options(options);
+    check_node_layout_options(options);
 }
 
 TwoLevelInput two_level_input(const Scene& scene) {

@@ -241,22 +241,22 @@ TEST_CASE("the accelerator's direct collapse: lbvh's tree, flat, bvh4 or bvh8; i
 
 TEST_CASE("lbvh's flat wide trees are direct unless a collapse is asked for; other trees take the optimal collapse", "[builders][direct]") {
     const FlatScene flat = flatten(load_scene("gen:box?tris=500&seed=2"));
-    const auto collapse_of = [](const char* builder, const char* kernel, std::optional<CollapseMethod> collapse = {},
+    const auto collapse_for = [](const char* builder, const char* kernel, std::optional<CollapseMethod> collapse = {},
                                 const char* toplevel = "flat") {
         CanopyOptions options{builder, "", kernel};
         options.toplevel = toplevel, options.collapse = collapse;
-        return default_collapse(options);
+        return collapse_of(options);
     };
-    CHECK(collapse_of("lbvh", "bvh8") == CollapseMethod::Direct);
-    CHECK(collapse_of("lbvh", "bvh4") == CollapseMethod::Direct);
-    CHECK(collapse_of("lbvh", "bvh2") == CollapseMethod::Optimal);
-    CHECK(collapse_of("lbvh", "bvh8", {}, "two-level") == CollapseMethod::Optimal);
-    CHECK(collapse_of("lbvh", "bvh8", CollapseMethod::Optimal) == CollapseMethod::Optimal);
-    CHECK(collapse_of("lbvh", "bvh8", CollapseMethod::Greedy) == CollapseMethod::Greedy);
-    CHECK(collapse_of("binned", "bvh8") == CollapseMethod::Optimal);
-    CHECK(collapse_of("bittner", "bvh8") == CollapseMethod::Optimal);  // its start tree is lbvh's binary tree
+    CHECK(collapse_for("lbvh", "bvh8") == CollapseMethod::Direct);
+    CHECK(collapse_for("lbvh", "bvh4") == CollapseMethod::Direct);
+    CHECK(collapse_for("lbvh", "bvh2") == CollapseMethod::Optimal);
+    CHECK(collapse_for("lbvh", "bvh8", {}, "two-level") == CollapseMethod::Optimal);
+    CHECK(collapse_for("lbvh", "bvh8", CollapseMethod::Optimal) == CollapseMethod::Optimal);
+    CHECK(collapse_for("lbvh", "bvh8", CollapseMethod::Greedy) == CollapseMethod::Greedy);
+    CHECK(collapse_for("binned", "bvh8") == CollapseMethod::Optimal);
+    CHECK(collapse_for("bittner", "bvh8") == CollapseMethod::Optimal);  // its start tree is lbvh's binary tree
     if (!kernel_compiled(8) || !cpu_runs(8)) return;
-    // The accelerator builds what default_collapse says and names it.
+    // The accelerator builds what collapse_of says and names it.
     for (const auto& [collapse, name] : {std::pair{std::optional<CollapseMethod>{}, "bvh8 direct"},
                                          std::pair{std::optional{CollapseMethod::Optimal}, "bvh8"}}) {
         CanopyOptions options{"lbvh", "", "bvh8"};
