@@ -48,7 +48,10 @@ inline std::pair<float, float> turn_cos_sin(float u) {
 }
 
 // Cosine-weighted direction about unit normal n (Malley's method), with the orthonormal basis of
-// Duff et al. 2017, "Building an Orthonormal Basis, Revisited".
+// Duff et al. 2017, "Building an Orthonormal Basis, Revisited". The result is unit length as it stands (weights
+// whose squares sum to 1 on orthonormal t, s, n; within 3.3e-7 over 20 M samples): normalising it again put a square
+// root and a division on the way from each hit to the next ray, and frames took 1.04x to 1.05x as long with it
+// (conference, one thread, canopy's and Embree's alike).
 inline Vec3 cosine_direction(const Vec3& n, float u1, float u2) {
     const float sign = std::copysign(1.0f, n.z);
     const float a = -1.0f / (sign + n.z);
@@ -57,7 +60,7 @@ inline Vec3 cosine_direction(const Vec3& n, float u1, float u2) {
     const Vec3 s(b, sign + n.y * n.y * a, -n.y);
     const float r = std::sqrt(u1);
     const auto [cos_phi, sin_phi] = turn_cos_sin(u2);
-    return glm::normalize(r * cos_phi * t + r * sin_phi * s + std::sqrt(std::max(0.0f, 1.0f - u1)) * n);
+    return r * cos_phi * t + r * sin_phi * s + std::sqrt(std::max(0.0f, 1.0f - u1)) * n;
 }
 
 // Moves a hit point off its surface along the normal n that faces the new ray: a few ulps scaled by
