@@ -356,8 +356,8 @@ template <Query Q, int N, class Tree, class Counter, class LeafFn>
             uint32_t mask = intersect_children<N>(node, ray, t_min, tfar, tnear);
             // The counts through a pointer the compiler cannot relate to the child references: else GCC adds the
             // references' offset to the lane index, to share one address for both loads, an add on the way from
-            // the node's test to its child's loads. Both changes: crytek-sponza, sibenik and conference rays 0.6 to
-            // 1.2% faster in a single-thread replay (docs/results.md, AVX-512 variants), frames within their noise.
+            // the node's test to its child's loads. With lowest_lane: a ray's time 0.8 to 2.2% less against Embree's
+            // in tests/kernel_replay (docs/results.md, the node step's instructions), frames within their noise.
             const auto* counts = node.count;
             asm("" : "+r"(counts));
 
