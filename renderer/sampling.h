@@ -50,8 +50,8 @@ inline std::pair<float, float> turn_cos_sin(float u) {
 // Cosine-weighted direction about unit normal n (Malley's method), with the orthonormal basis of
 // Duff et al. 2017, "Building an Orthonormal Basis, Revisited". The result is unit length as it stands (weights
 // whose squares sum to 1 on orthonormal t, s, n; within 3.3e-7 over 20 M samples): normalising it again put a square
-// root and a division on the way from each hit to the next ray, and frames took 1.04x to 1.06x as long with it
-// (conference, one thread, canopy's and Embree's alike).
+// root and a division on the way from each hit to the next ray: without them canopy's one-thread frames took 0.97x
+// (conference) and 0.99x (sibenik) as long, Embree's within noise (docs/results.md, shading's second normalisation).
 inline Vec3 cosine_direction(const Vec3& n, float u1, float u2) {
     const float sign = std::copysign(1.0f, n.z);
     const float a = -1.0f / (sign + n.z);
