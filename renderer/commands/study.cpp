@@ -2,6 +2,7 @@
 
 #include "accel/builder.h"
 #include "renderer/accelerator.h"
+#include "renderer/recorded_rays.h"
 #include "renderer/distributed.h"
 #include "renderer/commands/per_scene.h"
 
@@ -9,7 +10,6 @@
 #include <glm/gtc/matrix_transform.hpp>
 #include <nlohmann/json.hpp>
 
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
@@ -50,43 +50,6 @@ struct Rotation {
         return rotated;
     }
 };
-
-// Records every ray a tracer is asked for, and answers with the accelerator's hit.
-struct RecordingTracer {
-    const Accelerator& accel;
-    std::vector<Ray>& rays;
-    bool closest(const Ray& ray, Hit& hit) const {
-        rays.push_back(ray);
-        hit = accel.trace(ray);
-        return hit.found();
-    }
-};
-
-// The diffuse rays of one protocol frame (sample 0), traced single-threaded so their order is fixed.
-std::vector<Ray> diffuse_rays(const Accelerator& reference, const FlatScene& flat, const PinholeCamera& camera, int w, int h) {
-    std::vector<Ray> rays;
-    FrameSettings settings;
-    settings.width = w, settings.height = h;
-    const ShadingScene shading{flat, settings};
-    const RecordingTracer tracer{reference, rays};
-    for (int y = 0; y < h; ++y)
-        for (int x = 0; x < w; ++x) {
-            Rng rng(uint64_t(y) * uint64_t(w) + uint64_t(x), 0);
-            uint64_t count = 0;
-            const float u = rng.next_float(), v = rng.next_float();
-            Ray ray = camera.generate(x, y, u, v);
-            trace_path(tracer, shading, ray, rng, count);
-        }
-    return rays;
-}
-
-// Single-threaded nanoseconds per ray of one pass over `rays`.
-double pass_ns_per_ray(const Accelerator& accel, const std::vector<Ray>& rays) {
-    if (rays.empty()) return 0.0;
-    const auto start = std::chrono::steady_clock::now();
-    for (const Ray& ray : rays) (void)accel.trace(ray);  // a virtual call: never optimised away
-    return std::chrono::duration<double, std::nano>(std::chrono::steady_clock::now() - start).count() / double(rays.size());
-}
 
 // The fastest of `repeats` passes.
 double ns_per_ray(const Accelerator& accel, const std::vector<Ray>& rays, int repeats) {
