@@ -19,6 +19,9 @@ using namespace canopy;
 
 namespace {
 
+// The protocol's paths at half the frame's resolution, one sample a pixel, every bounce.
+constexpr int kWidth = 512, kHeight = 384;
+
 uint64_t hits(const Accelerator& accel, const std::vector<Ray>& rays) {
     uint64_t found = 0;
     for (const Ray& ray : rays) found += accel.trace(ray).found();
@@ -60,13 +63,12 @@ int main(int argc, char** argv) {
         const auto ours = make_canopy_accelerator(scene, flat, options);
         const auto embree = make_embree_accelerator(flat, quality, 1);
         for (Accelerator* accel : {ours.get(), embree.get()}) accel->prepare(), accel->build();
-        // The protocol's paths at half the frame's resolution, one sample a pixel, every bounce.
-        const PinholeCamera camera(scene_camera(scene, flat), 512, 384);
-        const std::vector<Ray> rays = diffuse_rays(*ours, flat, camera, 512, 384);
+        const PinholeCamera camera(scene_camera(scene, flat), kWidth, kHeight);
+        const std::vector<Ray> rays = diffuse_rays(*ours, flat, camera, kWidth, kHeight);
         FrameSettings settings;
-        settings.width = 512, settings.height = 384;
+        settings.width = kWidth, settings.height = kHeight;
         const ShadingScene shading{flat, settings};
-        Image image(512, 384);
+        Image image(kWidth, kHeight);
         const auto time = [&](const Accelerator& accel) {
             return pass == "rays" ? pass_ns_per_ray(accel, rays) : frame_ns_per_ray(accel, shading, camera, image);
         };
