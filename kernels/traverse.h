@@ -97,10 +97,11 @@ namespace detail {
 // Robust mode (Ize 2013's guarantee, "Robust BVH Ray Traversal", by other means) lowers the near planes' addend
 // and raises the far planes' by pad = kRobustPad R |inv_dir|, R = P + |org| with P and |org| the largest
 // magnitudes of the tree's plane coordinates (frame.bound) and of the translated origin's. Against the exact
-// (plane - org) / dir, the FMA form rounds 1/dir, org * inv_dir, the addend and the FMA itself: errors of u times
-// (|plane| + |org|), |org|, |org| + pad and |plane| + |org| + pad, times |inv_dir|; the translation adds u |org|
-// |inv_dir| (a rounded difference), and the planes, rounded outwards, only grow the boxes: under 5 u R |inv_dir|
-// in all (first order), less than pad, so a box the ray touches is never culled, at any coordinates. Ize's
+// (plane - org) / dir, the FMA form rounds 1/dir, the padded origin org -+ reach (pad = reach |inv_dir|), its
+// product with inv_dir and the FMA itself: errors of u times (|plane| + |org|), |org| + reach, |org| + reach and
+// |plane| + |org| + pad, times |inv_dir|; the translation adds u |org| |inv_dir| (a rounded difference), and the
+// planes, rounded outwards, only grow the boxes: under 5 u R |inv_dir| in all (first order, reach being 8 u R),
+// less than pad, so a box the ray touches is never culled, at any coordinates. Ize's
 // relative padding needs the difference plane - org, a subtraction and a multiplication per slab: this costs one
 // FMA, as the fast mode does. The price: boxes widen by 8 u R in world units, a few float spacings of the
 // tree's extent.
@@ -116,42 +117,52 @@ struct SlabRay {
     int near[3], far[3];
 
     SlabRay() = default;  // for arrays of rays set up later (stream traversal)
-    // In SSE lanes x, y, z: one division for the three reciprocals, no branches.
+    // In SSE lanes x, y, z: one division for the three reciprocals, no branches but one never taken. A frame's ray
+    // waits on the hit before it, so this setup's latency is paid on every bounce: everything that does not need
+    // the reciprocals (the planes' offsets from the direction's signs, the padded origin) is computed beside the
+    // division, and the unusable axes' fix-up (see above) leaves the path behind a branch.
     [[gnu::always_inline]] SlabRay(const Ray& ray, const PlaneFrame& frame, bool robust) {
         const __m128 sign = _mm_set1_ps(-0.0f);
         const __m128 dir = _mm_setr_ps(ray.dir.x, ray.dir.y, ray.dir.z, 1.0f);
         const __m128 org = _mm_sub_ps(_mm_setr_ps(ray.org.x, ray.org.y, ray.org.z, 0.0f),
                                       _mm_setr_ps(frame.origin.x, frame.origin.y, frame.origin.z, 0.0f));
+        const int negative = _mm_movemask_ps(dir);  // inv_dir's signs, a NaN's included (division keeps them)
+        for (int a = 0; a < 3; ++a) {
+            const int flip = (negative >> a & 1) * 3 * N;
+            near[a] = flip + a * N;
+            far[a] = 3 * N - flip + a * N;
+        }
         // |dir| raised to kMinSlabDir with dir's sign; a NaN stays NaN (max returns its second operand then).
         const __m128 magnitude = _mm_max_ps(_mm_set1_ps(kMinSlabDir), _mm_andnot_ps(sign, dir));
         const __m128 safe_dir = _mm_or_ps(magnitude, _mm_and_ps(sign, dir));
         const __m128 inv = _mm_div_ps(_mm_set1_ps(1.0f), safe_dir);
-        const __m128 add = _mm_xor_ps(_mm_mul_ps(org, inv), sign);
-        __m128 pad = _mm_setzero_ps();
+        // The padded addends as one product each: -(org + pad_org) inv with pad_org = reach sgn(dir), so that
+        // -pad_org inv = -reach |inv_dir| = -pad on the near side and +pad on the far one.
+        __m128 pad_org = _mm_setzero_ps();
         if (robust) {
             const __m128 abs_org = _mm_andnot_ps(sign, org);
             const __m128 yz = _mm_max_ps(_mm_movehdup_ps(abs_org), _mm_movehl_ps(abs_org, abs_org));
             const __m128 org_max = _mm_max_ps(abs_org, yz);  // lane 0: the largest |org| component
             const __m128 r = _mm_add_ps(_mm_set1_ps(frame.bound), _mm_broadcastss_ps(org_max));
-            const __m128 reach = _mm_mul_ps(_mm_set1_ps(kRobustPad), r);
-            pad = _mm_mul_ps(reach, _mm_andnot_ps(sign, inv));
+            pad_org = _mm_or_ps(_mm_mul_ps(_mm_set1_ps(kRobustPad), r), _mm_and_ps(sign, dir));
         }
-        const __m128 lower = _mm_sub_ps(add, pad), upper = _mm_add_ps(add, pad);
+        __m128 lower = _mm_xor_ps(_mm_mul_ps(robust ? _mm_add_ps(org, pad_org) : org, inv), sign);
+        __m128 upper = _mm_xor_ps(_mm_mul_ps(robust ? _mm_sub_ps(org, pad_org) : org, inv), sign);
+        __m128 inv_used = inv;
         const __m128 largest = _mm_set1_ps(std::numeric_limits<float>::max());
         const __m128 usable = _mm_and_ps(_mm_cmple_ps(_mm_andnot_ps(sign, lower), largest),
                                          _mm_cmple_ps(_mm_andnot_ps(sign, upper), largest));  // false on inf, NaN
-        const __m128 infinity = _mm_set1_ps(std::numeric_limits<float>::infinity());
-        alignas(16) float lanes[3][4];
-        _mm_store_ps(lanes[0], _mm_and_ps(inv, usable));
-        _mm_store_ps(lanes[1], _mm_blendv_ps(_mm_xor_ps(infinity, sign), lower, usable));
-        _mm_store_ps(lanes[2], _mm_blendv_ps(infinity, upper, usable));
-        const int negative = _mm_movemask_ps(inv);
-        for (int a = 0; a < 3; ++a) {
-            inv_dir[a] = lanes[0][a], near_add[a] = lanes[1][a], far_add[a] = lanes[2][a];
-            const int flip = (negative >> a & 1) * 3 * N;
-            near[a] = flip + a * N;
-            far[a] = 3 * N - flip + a * N;
+        if (_mm_movemask_ps(usable) != 0xf) [[unlikely]] {
+            const __m128 infinity = _mm_set1_ps(std::numeric_limits<float>::infinity());
+            inv_used = _mm_and_ps(inv, usable);
+            lower = _mm_blendv_ps(_mm_xor_ps(infinity, sign), lower, usable);
+            upper = _mm_blendv_ps(infinity, upper, usable);
         }
+        alignas(16) float lanes[3][4];
+        _mm_store_ps(lanes[0], inv_used);
+        _mm_store_ps(lanes[1], lower);
+        _mm_store_ps(lanes[2], upper);
+        for (int a = 0; a < 3; ++a) inv_dir[a] = lanes[0][a], near_add[a] = lanes[1][a], far_add[a] = lanes[2][a];
     }
 };
 
