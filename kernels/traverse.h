@@ -148,6 +148,7 @@ struct SlabRay {
             const __m128 r = _mm_add_ps(_mm_set1_ps(frame.bound), _mm_broadcastss_ps(org_max));
             pad_org = _mm_or_ps(_mm_mul_ps(_mm_set1_ps(kRobustPad), r), _mm_and_ps(sign, dir));
         }
+        // Fast mode multiplies org itself: org + 0 would turn an origin's -0 into +0 and flip a zero addend's sign.
         __m128 lower = _mm_xor_ps(_mm_mul_ps(robust ? _mm_add_ps(org, pad_org) : org, inv), sign);
         __m128 upper = _mm_xor_ps(_mm_mul_ps(robust ? _mm_sub_ps(org, pad_org) : org, inv), sign);
         __m128 inv_used = inv;
@@ -407,7 +408,7 @@ template <Query Q, int N, class Tree, class Counter, class LeafFn>
                 // node's). Every pushed child's four lines, as before, crowded the load queue with lines a nearer hit
                 // often culls: with the next child alone prefetched, binned bvh8 frames took 0.912x and 0.888x
                 // Embree MEDIUM's on sibenik against 0.931x and 0.936x, 0.877x and 0.868x on crytek-sponza against
-                // 0.923x and 0.902x; the second child's prefetch, frames within noise, rays 1% faster alone.
+                // 0.923x and 0.902x. The second child's prefetch: frames the same, rays 1% faster in kernel_replay.
                 prefetch(nodes, leaves, sp[-1]);
                 prefetch(nodes, leaves, sp[-2]);
                 continue;
