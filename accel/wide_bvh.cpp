@@ -10,6 +10,7 @@
 #include <numeric>
 #include <random>
 #include <stdexcept>
+#include <utility>
 
 namespace canopy {
 namespace {
@@ -144,30 +145,42 @@ private:
         return solved;
     }
 
+    typedef float Lanes __attribute__((vector_size(32)));
+    typedef int32_t Ints __attribute__((vector_size(32)));
+
+    // Lane j holds lane j - I of `lanes`, or `fill`'s where j < I: the lanes moved up by I, one constant permute
+    // (__builtin_shufflevector, which GCC and Clang both take; indices from 8 pick `fill`).
+    template <int I>
+    static Lanes shifted_up(Lanes lanes, Lanes fill) {
+        return [&]<int... J>(std::integer_sequence<int, J...>) {
+            return __builtin_shufflevector(lanes, fill, (J >= I ? J - I : 8 + J)...);
+        }(std::make_integer_sequence<int, 8>{});
+    }
+
     // S(n, k) for every k at once, and the left child's share that reaches each: lane j stands for k = j + 1, and
-    // for each share i, lane j of `shifted` is C(right, k - i), +inf where k - i < 1, so one vector add makes every
-    // k's sum (one k at a time, the sums were scalar chains of dependent minima: lbvh's crytek-sponza bvh8 build,
-    // whose plan covers 524 k binary nodes, took 23.5 ms on 2 threads and 39.5 on 1, now 22.1 and 37.7, the same
-    // tree). The shifts are register permutes: unaligned loads from a freshly written array waited for their stores
-    // each time. Shares are tried in increasing order and a later one wins only when strictly cheaper, as one k at
-    // a time, so the choices are the scalar ones.
+    // for each share i, lane j of the shifted costs is C(right, k - i), +inf where k - i < 1, so one vector add makes
+    // every k's sum (one k at a time, the sums were scalar chains of dependent minima: lbvh's crytek-sponza bvh8
+    // build, whose plan covers 524 k binary nodes, took 23.5 ms on 2 threads and 39.5 on 1, now 22.1 and 37.7, the
+    // same tree). The shifts are register permutes: unaligned loads from a freshly written array waited for their
+    // stores each time. Shares are tried in increasing order and a later one wins only when strictly cheaper, as one
+    // k at a time, so the choices are the scalar ones.
     static Costs split_costs(const Costs& left, const Costs& right, std::array<uint8_t, N + 1>& split) {
         static_assert(N <= 8, "one 8-lane vector holds every k");
-        typedef float Lanes __attribute__((vector_size(32)));
-        typedef int32_t Ints __attribute__((vector_size(32)));
         constexpr float inf = std::numeric_limits<float>::infinity();
-        const Ints lane = {0, 1, 2, 3, 4, 5, 6, 7};
-        Lanes right_lanes = Lanes{} + inf;  // lane j: C(right, j + 1)
+        const Lanes infinite = Lanes{} + inf;
+        Lanes right_lanes = infinite;  // lane j: C(right, j + 1)
         std::memcpy(&right_lanes, right.data() + 1, sizeof(float) * N);
-        Lanes best = Lanes{} + inf;
+        Lanes best = infinite;
         Ints share = Ints{} + 1;
-        for (int i = 1; i < N; ++i) {
-            const Lanes shifted = lane >= i ? __builtin_shuffle(right_lanes, (lane - i) & 7) : Lanes{} + inf;
-            const Lanes cost = left[i] + shifted;
+        const auto try_share = [&]<int I>() {
+            const Lanes cost = left[I] + shifted_up<I>(right_lanes, infinite);
             const Ints cheaper = cost < best;
-            share = cheaper ? Ints{} + i : share;
+            share = cheaper ? Ints{} + I : share;
             best = cheaper ? cost : best;
-        }
+        };
+        [&]<int... I>(std::integer_sequence<int, I...>) {
+            (try_share.template operator()<I + 1>(), ...);  // shares 1 to N - 1, in order
+        }(std::make_integer_sequence<int, N - 1>{});
         Costs out;
         out[0] = inf;
         for (int j = 0; j < N; ++j) out[j + 1] = best[j], split[j + 1] = uint8_t(share[j]);

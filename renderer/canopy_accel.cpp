@@ -17,6 +17,7 @@
 #include <cmath>
 #include <cstdio>
 #include <map>
+#include <type_traits>
 #include <variant>
 
 namespace canopy {
@@ -122,7 +123,7 @@ class CanopyAccelerator final : public Accelerator {
                 return with_modes(options_, [&](auto robust, auto test) {
                     return f.template operator()<N, decltype(robust)::value, typename decltype(test)::type>(bvh);
                 });
-            } else {
+            } else if constexpr (!std::is_void_v<Result>) {
                 return Result{};
             }
         }, layout_);

@@ -342,7 +342,9 @@ TEST_CASE("load_gltf names the file when it is missing, truncated anywhere, or i
     // Cut anywhere: in the header, a chunk header, the JSON or the binary data.
     const std::pair<std::string, std::string> files[] = {{gltf.write_glb(dir, "whole.glb"), "cut.glb"},
                                                          {gltf.write_gltf(dir, "whole.gltf"), "cut.gltf"}};
-    for (const auto& [whole, cut] : files) {
+    for (const auto& file : files) {
+        const std::string& whole = file.first;
+        const std::string& cut = file.second;  // not a structured binding: the lambda below captures it (clang 14)
         std::ifstream in(whole, std::ios::binary);
         const std::string bytes{std::istreambuf_iterator<char>(in), {}};
         for (size_t length = 0; length < bytes.size(); ++length) {
