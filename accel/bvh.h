@@ -1,7 +1,7 @@
 #pragma once
 // The binary BVH that every builder produces. Leaves index into `refs`, a list of triangle ids in
 // which a triangle may appear more than once (split builders place pieces of it in several leaves).
-#include "accel/geometry.h"
+#include "base/geometry.h"
 
 #include <cstdint>
 #include <memory>

@@ -3,10 +3,10 @@
 // O(N log N)": events sorted once and swept and spliced in linear time per node (its O(N log N) algorithm), "perfect
 // splits" (every straddling triangle clipped exactly to each child's voxel, so its candidate planes come from the
 // clipped bounds), the SAH with the empty-space bonus lambda(p), and termination by cost and depth. Subtrees are
-// built in parallel. A second structure family beside the BVH: renderer/kd_accel.cpp traces it. Leaves are stored
+// built in parallel. A second structure family beside the BVH: engine/kd_accelerator.cpp traces it. Leaves are stored
 // as the wide BVHs store theirs, in SIMD triangle blocks (accel/wide_bvh.h), so the kernel tests them with the same
 // block tests.
-#include "accel/geometry.h"
+#include "base/geometry.h"
 #include "accel/wide_bvh.h"
 
 #include <cstdint>

@@ -69,7 +69,7 @@ const ReferenceCap kReferenceCaps[] = {
     {kKdTreeName, KdSettings{}.max_references_per_triangle},
 };
 
-// The builders `--builder auto` chooses from (renderer/auto_builder.cpp): its estimate is the largest of theirs, plus
+// The builders `--builder auto` chooses from (engine/auto_builder.cpp): its estimate is the largest of theirs, plus
 // the largest layout again, as its calibration keeps the best tree so far while it builds the next.
 constexpr const char* kAutoCandidates[] = {"binned", "bonsai-split", "esc", "sbvh", "sweep", "bittner", "lbvh"};
 

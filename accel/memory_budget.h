@@ -2,6 +2,8 @@
 // A build's peak memory, estimated before anything large is allocated, against the memory the process may use:
 // a scene too large for the machine is refused with an error that names both numbers, instead of the kernel
 // killing the process half-way through generating or building it.
+#include "scenes/scene.h"
+
 #include <cstdint>
 #include <optional>
 #include <span>
@@ -9,14 +11,6 @@
 #include <string>
 
 namespace canopy {
-
-// What is known of a scene before it is built: for a generator spec, before a triangle is generated.
-struct SceneSize {
-    uint64_t vertices = 0;             // stored positions, over all meshes
-    uint64_t triangles = 0;            // stored triangles, over all meshes (each once, however often placed)
-    uint64_t instanced_triangles = 0;  // with every placement expanded: what flatten() produces
-    uint64_t instances = 1;
-};
 
 // One accelerator to be built over the scene.
 struct BuildPlan {

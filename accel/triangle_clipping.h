@@ -3,7 +3,7 @@
 // (SBVH's reference splitting, Stich et al. 2009 sec. 4.3; split clipping, Ganestam and Doggett 2016 sec. 3.2;
 // early split clipping, Ernst and Greiner 2007 alg. 4). The bounds are those of the clipped polygon, not of a
 // cut box, and they are rounded outwards so that they always contain the exact piece.
-#include "accel/geometry.h"
+#include "base/geometry.h"
 
 #include <bit>
 #include <cmath>

@@ -1,6 +1,6 @@
 #pragma once
 // Random numbers, cosine-weighted directions and robust ray offsets for the path tracer.
-#include "accel/geometry.h"
+#include "base/geometry.h"
 
 #include <bit>
 #include <cmath>

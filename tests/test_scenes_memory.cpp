@@ -1,6 +1,7 @@
 // Memory bounds: the estimate grows with what a build holds, the bound is the least of the machine's and the
 // caller's, and load_scene asks before it generates a scene or before instancing multiplies a file's triangles.
 #include "scenes_test_support.h"
+#include "accel/memory_budget.h"
 
 using namespace canopy;
 using namespace canopy::test;

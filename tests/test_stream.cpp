@@ -2,9 +2,10 @@
 // (renderer/wavefront.h): every batch answer is the single-ray kernel's, and the stream tracer renders the same
 // paths as the single-path tracer.
 #include "kernels/ray_order.h"
+#include "experiments/embree_accelerator.h"
 #include "kernels/traverse_stream.h"
 #include "oracle.h"
-#include "renderer/accelerator.h"
+#include "renderer/frames.h"
 #include "renderer/wavefront.h"
 #include "test_scale.h"
 #include "two_level_support.h"
@@ -272,7 +273,7 @@ Frame render_with(const Accelerator& accel, const Scene& scene, const FlatScene&
     const ShadingScene shading{flat, settings, &stats};
     Image image(settings.width, settings.height);
     const PinholeCamera camera(scene_camera(scene, flat), settings.width, settings.height);
-    const uint64_t rays = accel.render(shading, camera, 3, image);
+    const uint64_t rays = render(accel, shading, camera, 3, image);
     if (tracer == TracerKind::Stream) CHECK(stats.bytes.load() > 0);
     return {image.average(1), image.mean(1), rays};
 }

@@ -2,6 +2,7 @@
 // flattened world triangles, with instances rotated, scaled non-uniformly and overlapping; re-braiding is
 // deterministic; transformed boxes are conservative.
 #include "two_level_support.h"
+#include "experiments/embree_accelerator.h"
 #include "kernels/traverse_two_level.h"
 
 #include <glm/gtc/matrix_transform.hpp>

@@ -1,0 +1,36 @@
+#include "engine/options.h"
+
+#include "accel/builder.h"
+
+#include <algorithm>
+#include <stdexcept>
+
+namespace canopy {
+
+std::string builder_names() {
+    std::string names;
+    for (const BuilderName& b : all_builders()) names += (names.empty() ? "" : ", ") + b.name;
+    return names + ", or auto (candidates built and timed on a sample of the frame, for --frames-planned)";
+}
+
+void check_blas_builder(const std::string& blas, const std::vector<std::string>& toplevels) {
+    if (blas.empty()) return;
+    if (std::none_of(toplevels.begin(), toplevels.end(), [](const std::string& t) { return t != "flat"; }))
+        throw std::invalid_argument("--blas-builder " + blas + ": only --toplevel two-level or rebraid has object BVHs");
+    if (blas == "auto") throw std::invalid_argument("--blas-builder auto: auto chooses a whole accelerator, not an object BVH builder");
+    try {
+        find_builder(blas);
+    } catch (const std::invalid_argument& e) {
+        throw std::invalid_argument(std::string("--blas-builder: ") + e.what());
+    }
+}
+
+Scene load_scene_within_memory(const std::string& name, std::span<const BuildPlan> plans,
+                               std::optional<uint64_t> memory_limit) {
+    const MemoryAvailable available = available_memory(memory_limit);
+    return load_scene(name, [&](const SceneSize& size) {
+        require_memory(name.empty() ? "the default scene" : name, estimate_memory(size, plans), available);
+    });
+}
+
+}  // namespace canopy
