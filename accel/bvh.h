@@ -21,8 +21,9 @@ struct BvhNode {
 static_assert(sizeof(BvhNode) == 32);
 
 // Allocates node arrays without initialising them: builders write every node they resize to, so value-initialising
-// them first (empty boxes, zero counts) is a wasted pass over the array (on crytek-sponza's LBVH, 2.8 ms beside a
-// 6 ms sort). BvhNode is an aggregate, an implicit-lifetime type, so the allocated bytes are its objects as they are.
+// them first (empty boxes, zero counts) is a wasted pass over the array, a fast build's sizeable share
+// (docs/results.md#builds-and-layouts). BvhNode is an aggregate, an implicit-lifetime type, so the allocated bytes
+// are its objects as they are.
 template <class T>
 struct UninitializedAllocator : std::allocator<T> {
     static_assert(std::is_trivially_destructible_v<T> && std::is_trivially_copyable_v<T>);

@@ -51,11 +51,9 @@ struct KdNode {
 static_assert(sizeof(KdNode) == 8);
 
 // A leaf's triangles, a lane each in order, in blocks of the lanes the wide BVH kernels test at once on this build
-// (block_lanes); the last block's spare lanes hold TriangleBlock's padding (prim kNone, never hit). Against one
-// triangle at a time, 8-lane blocks traced gen:cylinders (300k) 4.5x faster and stanford-bunny 1.1x, crytek-sponza
-// within noise, for 2.3x the memory on the last two, whose leaves hold 1 to 2 triangles on average. 4-lane blocks
-// took 0.6x the 8-lane memory but traced cylinders 1.23x slower (bunny and sponza within noise; one batch on a
-// loaded machine).
+// (block_lanes); the last block's spare lanes hold TriangleBlock's padding (prim kNone, never hit). Blocks pay where
+// leaves hold many triangles (long slivers) and cost memory where they hold one or two; 8 lanes take more memory than
+// 4 but traced slivers faster (docs/results.md#kd-leaves-as-simd-blocks, docs/results.md#builds-and-layouts).
 constexpr int kKdLanes = block_lanes(8);
 using KdBlock = TriangleBlock<kKdLanes>;
 

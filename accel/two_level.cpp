@@ -203,7 +203,7 @@ private:
     // A BRef of node (child, count) of an instance's object tree, whose object box is `box`. Sec. 5.4: a
     // transformed node's world box is conservative, its object box transformed. Re-braiding looks into the object
     // tree anyway, so for an inner node it takes the union of its children's transformed boxes, which is tighter:
-    // fewer rays enter an instance only to miss it (zoo-64: 13% fewer entries per ray). The same boxes' areas
+    // fewer rays enter an instance only to miss it (docs/results.md#builds-and-layouts). The same boxes' areas
     // decide whether opening it is worth the entries (fewer_entries).
     BRef placed_ref(uint32_t instance, uint32_t child, uint32_t count, const BBox& box, float prims) const {
         BRef r{placed_box(instance, box), instance, child, count, prims};
@@ -259,8 +259,8 @@ private:
 
     // Sec. 4.2 and 5.3: every openable BRef wider than open_extent of the segment's largest extent is replaced by
     // its children: the first in its slot, the others appended while the segment's free space lasts. The widest
-    // go first (sec. 7 suggests prioritising by size): with the space of sec. 5.2, taking them in array order left
-    // crytek-sponza at 1.07x flat, widest first at 1.00x.
+    // go first (sec. 7 suggests prioritising by size): with the space of sec. 5.2, array order left crytek-sponza
+    // slower than its flat tree and widest first did not (docs/results.md#builds-and-layouts).
     uint32_t open_wide_brefs(const Segment& s) {
         if (s.extra_end == s.end) return s.end;  // no space (only a node of one child would fit: not worth a sort)
         const BBox bounds = bounds_of(s);

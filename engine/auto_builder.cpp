@@ -104,10 +104,9 @@ SceneStatistics scene_statistics(const Scene& scene, const FlatScene& flat, doub
 namespace {
 
 // A candidate's prior: build time per triangle built, and frame time relative to binned SAH's as a function of the
-// scene's statistics. Fitted on the issue-28 validation run of 2026-12-04 (`canopy bench SCENE --builder
-// auto,binned,sweep,lbvh,sbvh,esc,bonsai-split,bittner --builds 3 --frames 10`, every shared scene but the zoos and
-// the procedural classes at their default sizes; 2 threads, bvh8, Zen 5), so the priors have seen those scenes:
-// they only order the calibration and predict the candidates it does not measure.
+// scene's statistics, fitted on bench runs of every candidate over the shared scenes and the procedural classes
+// (docs/results.md#autos-priors-and-samples), so the priors have seen those scenes: they only order the calibration
+// and predict the candidates it does not measure.
 struct Prior {
     const char* builder;
     const char* toplevel;
@@ -116,27 +115,26 @@ struct Prior {
     double (*relative_frame)(const SceneStatistics&);
 };
 
-// Scenes whose triangle boxes are this much larger than the triangles are made of long diagonal slivers
-// (gen:cylinders measures 23.3; every shared scene and gen:surface 1.1 to 2.2): spatial splits pay there only.
+// Scenes whose triangle boxes are this much larger than the triangles are made of long diagonal slivers, the only
+// scenes where spatial splits pay; the threshold lies well between the sliver fields' excess and every other scene's
+// (docs/results.md#autos-priors-and-samples).
 constexpr double kSliverExcess = 5.0;
 bool slivers(const SceneStatistics& s) { return s.box_excess > kSliverExcess; }
-// Scanned and finely tessellated surfaces (bunny 1.90, dragon, armadillo, gen:surface 2.05) have randomly
-// oriented triangles of similar size; architecture (crytek-sponza 1.48, sibenik 1.61, conference 1.59,
-// gen:box 1.12, cornell-box 1.10) has large axis-aligned walls next to small detail.
+// Scanned and finely tessellated surfaces have randomly oriented triangles of similar size, whose boxes exceed them
+// more than architecture's, large axis-aligned walls next to small detail; the threshold separates the measured
+// scenes of both (docs/results.md#autos-priors-and-samples).
 constexpr double kScanExcess = 1.75;
 bool architecture(const SceneStatistics& s) { return s.box_excess < kScanExcess; }
-// Architecture whose triangle boxes a ray pierces far more often than their triangles: crytek-sponza 6.8 (big
-// overlapping wall and arch triangles); sibenik 3.6, conference 3.7, gen:box 0.6, cornell-box 0.4, scans 1.7 to
-// 2.9. Splitting pays there even without slivers.
+// Architecture whose triangle boxes a ray pierces far more often than their triangles (crytek-sponza's big
+// overlapping wall and arch triangles, alone of the measured scenes): splitting pays there even without slivers.
 constexpr double kSplitCover = 5.0;
 bool dense_boxes(const SceneStatistics& s) { return architecture(s) && s.reducible_cover > kSplitCover; }
 // Objects placed more than once: flattening copies them.
 bool instanced(const SceneStatistics& s) { return s.triangles > s.unique_triangles; }
 
 // Sliver fields whose slivers cross the scene, against clustered ones: the reducible cover grows with the triangle
-// count n about as n^0.6 in both generators (3 k to 400 k triangles), and gen:cylinders' (long diagonals through the
-// scene: 148 at 3 k triangles, 785 at 50 k, 1140 at 100 k) is 10x gen:foliage's (leaves in clusters around branches:
-// 12, 54 at 48 k, 100 at 100 k, 373 at 400 k); the boundary lies between them at every count. Splitting every
+// count n about as n^0.6 in both generators, and this boundary lies between gen:cylinders' long diagonals and
+// gen:foliage's clustered leaves at every count measured (docs/results.md#autos-priors-and-samples). Splitting every
 // sliver's box at once (esc) pays most where slivers cross; splitting only where nodes overlap (sbvh, bonsai-split)
 // matches it where they cluster.
 constexpr double kCrossingCover = 0.35, kCrossingCoverExponent = 0.6;
@@ -144,61 +142,41 @@ bool crossing_slivers(const SceneStatistics& s) {
     return slivers(s) && s.reducible_cover > kCrossingCover * std::pow(double(s.unique_triangles), kCrossingCoverExponent);
 }
 
+// Frame priors relative to binned's by scene class: each is about the middle of what the builder's frames measured
+// in that class (docs/results.md#autos-priors-and-samples).
 double same_as_binned(const SceneStatistics&) { return 1.0; }
-// crytek-sponza 0.92; other architecture 1.00 to 1.15; scans 0.98 to 1.03; gen:cylinders 0.63 and 0.64, gen:foliage
-// 0.52 and 0.54.
 double bonsai_split_frame(const SceneStatistics& s) {
     return crossing_slivers(s) ? 0.64 : slivers(s) ? 0.53 : dense_boxes(s) ? 0.92 : architecture(s) ? 1.07 : 1.01;
 }
-// The same tree as binned where its automatic SA_max does not split; gen:cylinders 0.40 and 0.42, gen:foliage 0.51
-// and 0.52.
+// The same tree as binned where its automatic SA_max does not split.
 double esc_frame(const SceneStatistics& s) { return crossing_slivers(s) ? 0.41 : slivers(s) ? 0.51 : 1.0; }
-// crytek-sponza 0.87; other architecture 0.96 to 1.05; scans 0.98 to 1.01; gen:cylinders 0.72 and 0.75, gen:foliage
-// 0.47 and 0.48.
 double sbvh_frame(const SceneStatistics& s) {
     return crossing_slivers(s) ? 0.73 : slivers(s) ? 0.47 : dense_boxes(s) ? 0.87 : 1.0;
 }
 // Where binned's tree is measured, its sibling overlap o (accel/metrics.h) predicts sbvh's gain better than the class:
-// what object splits could not separate is what spatial splits may. sbvh / binned frames in the validation run of
-// 2026-12-06 (commit 9d2ce2d), against o: crytek-sponza 0.831 at 0.215, sibenik 0.919 at 0.181, dragon 0.978 at 0.182,
-// conference 1.004 at 0.172; 0.95 to 1.035 at 0.128 to 0.169 (armadillo, bunny, gen:surface, gen:box, gen:city,
-// gen:room). Least squares over those above the onset: 1 - 3.8 (o - 0.17). Held out, the scenes kept outside the
-// repository: 2CylinderEngine 0.865 at 0.214 (predicted 0.833), forklift 0.910 at 0.206 (0.863), Wuson 1.003 at
-// 0.182 (0.954), CG-57 0.976 and truman 0.958 at 0.170 and 0.163 (1.0); the class prior had said 1.0 for all five.
-// Floored at crytek-sponza's gain, the largest fitted; sliver fields keep their class priors (gen:foliage's 0.47 at
-// o = 0.23 is no extrapolation of this line).
+// what object splits could not separate is what spatial splits may. A least-squares line over the scenes above the
+// onset, which also predicted the held-out models better than the class prior
+// (docs/results.md#autos-priors-and-samples); floored at crytek-sponza's gain, the largest fitted; sliver fields keep
+// their class priors, as theirs lie off the line.
 constexpr double kSbvhOverlapOnset = 0.17, kSbvhOverlapGain = 3.8, kSbvhFrameFloor = 0.83;
-// Full sweeps instead of bins: 0.97 to 1.01 everywhere.
+// Full sweeps instead of bins: within a few percent of binned's frames everywhere.
 double sweep_frame(const SceneStatistics&) { return 1.0; }
-// crytek-sponza 0.85; other architecture 0.94 to 0.99; scans 1.02 to 1.07; gen:cylinders 0.73 and 0.83, gen:foliage
-// 0.85 and 0.91.
 double bittner_frame(const SceneStatistics& s) {
     return crossing_slivers(s) ? 0.78 : slivers(s) ? 0.88 : dense_boxes(s) ? 0.85 : architecture(s) ? 0.96 : 1.04;
 }
-// lbvh's default, the direct wide tree from the Morton codes (its optimal collapse: architecture 1.10 to 1.28, scans
-// 1.06 to 1.12, slivers 1.36 and 1.49, overlapping instances 1.25, zoo-64's flattened scans, whose Morton order
-// interleaves the instances' triangles). The direct tree against binned, commit 1da3c4a: objects seen from outside
-// 1.05 to 1.25, geometric mean 1.12 (bunny, armadillo, dragon, gen:surface and the four unseen models, 1024 x 768);
-// rooms and cities 1.27 to 1.67 (crytek-sponza 1.37, sibenik 1.30, conference 1.54, gen:box 1.27, gen:city 1.67),
-// slivers 1.50 and 1.73 (512 x 384, docs/results.md); instances the collapse's prior times the rooms' 1.1. The
-// cheapest build, so it wins where a frame is cheap against building.
+// lbvh's default, the direct wide tree from the Morton codes: its frames against binned's by class, instances (whose
+// flattened Morton order interleaves the instances' triangles) the optimal collapse's prior times the rooms' ratio to
+// it (docs/results.md#autos-priors-and-samples). The cheapest build, so it wins where a frame is cheap against
+// building.
 double lbvh_frame(const SceneStatistics& s) {
     return instanced(s) ? 1.38 : slivers(s) ? 1.6 : architecture(s) ? 1.4 : 1.12;
 }
-// zoo-64, traversal against flat's: rebraid 1.28 and 1.32 (two runs of commit 99a5deb; 1.035 and 1.063 in runs of
-// 2026-12-04, before flat frames got faster: 181 to 183 ms against 227, rebraid's 234 to 240 against 241). Plain
-// two-level (1.34) builds in the same time and traces slower, so it is no candidate.
+// rebraid's traversal against flat's, as measured on zoo-64 (docs/results.md#autos-priors-and-samples). Plain
+// two-level builds in the same time and traces slower, so it is no candidate.
 double rebraid_frame(const SceneStatistics&) { return 1.3; }
 
-// Builds, ns a triangle: binned 160 to 230, sweep 280 to 400, lbvh 90 to 130, sbvh 550 to 1660 (slivers 1550 to
-// 1950), esc as binned where it does not split (slivers 790 to 820), bonsai-split 190 to 350 (slivers 340 to 580),
-// bittner 2200 to 4700 (slivers 9600 to 12600). Since then binning (batched), node storage and the collapse got
-// faster: binned, esc, sbvh and rebraid's priors are scaled by their builds' measured speed-ups (same scenes and
-// trees, old and new binaries alternating: binned 0.73 to 0.79, esc 0.82 and 0.89 where it splits, sbvh 0.85 and
-// 0.99 on slivers, rebraid 0.81; sweep, lbvh and bonsai-split 0.97 to 1.0). sbvh's own builds got faster still (issue
-// 32): in the validation run of 2026-12-06 (commit 0302ee6) they took 2.6x to 6.5x binned's time on the shared scenes
-// and generators without slivers, geometric mean 3.9 (binned's prior times 3.9 is its prior here), where the older
-// prior said 6.5; the others' ratios to binned's were within 15% of their priors'.
+// Builds, ns a triangle, from the validation runs, scaled by each builder's later measured speed-ups where it got
+// faster; sbvh's is binned's times the geometric mean of their ratio (docs/results.md#autos-priors-and-samples).
 constexpr Prior kPriors[] = {
     {"binned", "flat", 145.0, 145.0, &same_as_binned},
     {"bonsai-split", "flat", 280.0, 450.0, &bonsai_split_frame},
@@ -206,21 +184,18 @@ constexpr Prior kPriors[] = {
     {"sbvh", "flat", 570.0, 1750.0, &sbvh_frame},
     {"sweep", "flat", 330.0, 330.0, &sweep_frame},
     {"bittner", "flat", 3300.0, 11000.0, &bittner_frame},
-    {"lbvh", "flat", 45.0, 45.0, &lbvh_frame},  // the direct tree: 0.37x to 0.61x the optimal collapse's build (1da3c4a)
-    // Instanced objects: each unique triangle is built once (zoo-64: 30 ms for 148 k unique triangles, 200 ns each,
-    // against flat binned's 734 ms; a prior of 600 ns had scaled every flat build down 3x once rebraid was measured).
+    {"lbvh", "flat", 45.0, 45.0, &lbvh_frame},  // the direct tree, a fraction of the optimal collapse's build
+    // Instanced objects: each unique triangle is built once, at a cost per unique triangle measured on zoo-64; a
+    // higher prior had scaled every flat build down once rebraid was measured
+    // (docs/results.md#autos-priors-and-samples).
     {"binned", "rebraid", 160.0, 160.0, &rebraid_frame},
 };
-// Frame time per pixel with binned, 2 threads, bvh8: rooms seen from inside 1.4 to 2.6 us (crytek-sponza, sibenik,
-// conference); slivers crossing the scene 3.0 us (gen:cylinders), clustered ones 0.47 us (gen:foliage; at 3.0 us,
-// auto expected a one-frame foliage image to be all frame and built sbvh first, for 1.23x the best time to image).
-// Objects seen from outside cost by what of the frame they cover: a pixel that misses all took 14 ns (the bunny
-// behind the camera), and the projected area's every unit 118 ns more, the least-squares fit (in logs) of the
-// shared scenes and generators seen from outside in the validation run of 2026-12-06 (ns a pixel at projected area:
-// armadillo 50 at 0.36, bunny 47 at 0.39, dragon 78 at 0.73, gen:surface 107 at 1.04, cornell-box 210 at 1.23, gen:box
-// 406 at 1.82, zoo-64 245 at 2.09), capped at the largest fitted area. One constant for all, 200 ns, had expected
-// the Truman carrier (unseen, 0.09 of the frame: 21 ns) to trace 10x slower than it did, and auto built binned where
-// lbvh's cheaper build was the better choice for one frame. The calibration replaces these by what it measures.
+// Frame time per pixel with binned, 2 threads, bvh8, by class: rooms seen from inside, slivers crossing the scene and
+// clustered ones (giving clustered slivers the crossing ones' cost made auto build sbvh first for a one-frame foliage
+// image). Objects seen from outside cost by what of the frame they cover: a pixel that misses all, plus a least-squares
+// fit (in logs) per unit of projected area, capped at the largest fitted area; one constant for all had priced an
+// object covering little of the frame far too dear, and auto built binned where lbvh's cheaper build was the better
+// choice for one frame (docs/results.md#autos-priors-and-samples). The calibration replaces these by what it measures.
 constexpr double kInsideNsPerPixel = 2000.0;
 constexpr double kMissNsPerPixel = 14.0, kProjectedAreaNsPerPixel = 118.0, kMaxFittedProjectedArea = 2.1;
 constexpr double kCrossingSliverNsPerPixel = 3000.0, kClusteredSliverNsPerPixel = 470.0;
@@ -301,11 +276,11 @@ std::vector<CandidateEstimate> prior_estimates(const SceneStatistics& stats, int
 
 // The first candidate measured: the one predicted best, unless it costs more to build than it is predicted to save
 // over the cheapest build predicted within kFirstSpread of it; then that cheapest build, which gives the priors their
-// scale before an expensive build is risked on them (conference, 16 frames: bittner, predicted best by 0.2 s for 1 s
-// more build, was built for 1.6 s and then traced no faster than binned). Always starting from the cheapest build
-// near the best had auto measure lbvh first at one frame on small scans, where binned is predicted to save several
-// times its extra build (armadillo: 12 ms for 1.6 ms), and then keep lbvh, as binned's whole build and sample would
-// no longer pay for themselves (1.07 to 1.11 of the best time to image).
+// scale before an expensive build is risked on them (a slow optimiser predicted best by a small margin was built and
+// then traced no faster than binned). Always starting from the cheapest build near the best had auto measure lbvh
+// first at one frame on small scans, where binned is predicted to save several times its extra build, and then keep
+// lbvh, as binned's whole build and sample would no longer pay for themselves
+// (docs/results.md#autos-priors-and-samples).
 constexpr double kFirstSpread = 1.1;
 size_t first_candidate(const std::vector<CandidateEstimate>& prior, int frames) {
     const double best = prior.front().time_to_image_ms(frames);  // prior_estimates sorts them

@@ -42,11 +42,11 @@ struct SceneStatistics {
     // SA_max splits (accel/builders/early_split_clipping.h); from it up, `esc` builds binned's tree.
     double box_fill = 1.0;
     // The camera's eye inside the scene's bounds: a room seen from within, where paths bounce to the bounce limit
-    // (crytek-sponza, sibenik, conference: 8.3 to 9 rays a pixel), not an object seen from outside (1.2 to 5.4).
+    // and so traces several times an outside view's rays a pixel (docs/results.md#autos-priors-and-samples).
     bool camera_inside = false;
     // The areas of the triangles in the camera's view projected on its image plane, over the image's area: the
-    // share of the frame the scene covers times its depth complexity. Scans seen from outside 0.36 to 0.73,
-    // cornell-box 1.23, zoo-64 2.09; crytek-sponza, seen from inside, 8.4.
+    // share of the frame the scene covers times its depth complexity, below one for a scan seen from outside and
+    // several for a room seen from inside (docs/results.md#autos-priors-and-samples).
     double projected_area = 1.0;
 };
 
@@ -119,27 +119,28 @@ constexpr double kCalibrationBudget = 0.05;
 
 // A measured candidate's frame time: its sample's reading and its prior rescaled by every measured candidate, each
 // weighted by the inverse of its variance in log terms. The prior's relative frame times are within about 10% on the
-// scenes they were fitted on, so kPriorLogVariance is 0.1 squared; a sample's reading varies with 1 / its timed
-// milliseconds, kSampleLogVariance of it at 1 ms (two samples of 0.15 ms, one tile in 128 of Wuson's frame, read
-// lbvh's frame at 0.86x binned's, which traced 0.95x lbvh's; the readings of 5 ms samples differ by 1 to 3%).
+// scenes they were fitted on, so kPriorLogVariance is 0.1 squared; a sample's reading's is kSampleLogVariance over
+// its timed milliseconds, as the shortest samples misread a frame by far more than samples of a few milliseconds
+// (docs/results.md#autos-priors-and-samples).
 constexpr double kPriorLogVariance = 0.01;
 constexpr double kSampleLogVariance = 0.003;
 double sample_weight(double timed_ms);
 
 // A sample of `sample_ms` through one tile in `stride` was too short to time (under `min_ms`): the stride of the
 // next, sized by this one's rate to take kSampleAim times min_ms, at most half of `stride` and at least 1 (the whole
-// frame). Growing by a fixed 4x instead overshot: on a 29 ms frame, samples of 0.9, 3.6 and then 14.5 ms.
+// frame). Growing by a fixed factor instead overshot (docs/results.md#autos-priors-and-samples).
 constexpr double kSampleAim = 1.25;
 uint32_t next_sample_stride(uint32_t stride, double sample_ms, double min_ms);
 // Before its sample, a tree after the calibration's first traces one tile in this many, untimed for the reading: a
 // sample of a tree just built pays the misses that bring its nodes into the caches, which a whole frame amortises.
-// Unwarmed, sbvh's one-frame samples of sibenik read 1.05x binned's frame where its frames take 0.92x; warmed,
-// 0.92x to 0.98x (three runs each). The first tree's warm-up is half its sample, which also wakes the threads.
+// Unwarmed, a one-frame sample could rank a faster tree behind a slower one
+// (docs/results.md#autos-priors-and-samples). The first tree's warm-up is half its sample, which also wakes the
+// threads.
 constexpr uint32_t kTreeWarmUpStride = 256;
 // What such a sample costs through a tree of `frame_ms` (not the first): its warm-up, one tile in `stride`, and where
 // that is under `min_ms`, the retrace next_sample_stride sizes (kSampleAim times min_ms, twice the first at least,
-// the whole frame at most). Counting the first trace alone, the budget took forklift's 16-frame samples (1 ms, then
-// 6.25) for a seventh of their cost.
+// the whole frame at most), since counting the first trace alone undercounted retraced samples several times over
+// (docs/results.md#autos-priors-and-samples).
 double expected_sample_cost_ms(double frame_ms, uint32_t stride, double min_ms);
 
 // sbvh's frame relative to binned's on a scene without slivers whose binned tree has this sibling overlap.

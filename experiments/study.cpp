@@ -187,7 +187,8 @@ void print_tables(const std::vector<SceneResult>& results, const Fit& fixed_scal
 
 double percent_change(double after, double before) { return 100.0 * (after / before - 1.0); }
 
-// "+12.3%" right-aligned in `width`, or "-" where a structure family does not define the metric (NaN).
+// The change signed, with one decimal and a percent sign, right-aligned in `width`, or "-" where a structure family
+// does not define the metric (NaN).
 std::string change_text(double percent, int width) {
     char text[32];
     if (std::isnan(percent)) std::snprintf(text, sizeof text, "%*s", width, "-");

@@ -24,8 +24,7 @@ struct FrameSettings {
     int width = 1024, height = 768;
     TracerKind tracer = TracerKind::Single;
     // stream: paths in flight per batch at most (each batch on one thread). Larger batches sort into more coherent
-    // rays: crytek-sponza stream frames 0.950x, 0.924x and 0.922x the single tracer's with 64k, 256k and 512k (one
-    // run), at 25, 74 and 148 MB for two threads.
+    // rays, and past this size gain little for their memory (docs/results.md#tracers-single-and-stream).
     uint32_t stream_paths = 1u << 18;
     BatchTraversal batch_traversal = BatchTraversal::Packet;  // stream: how canopy's kernels trace a batch
     bool embree_packets = false;  // stream: Embree's batches in rtcIntersect16 packets, not through rtcIntersect1M
@@ -80,8 +79,8 @@ struct PathState {
     if (depth == scene.settings.max_bounces) return false;
     const Vec3 p = tri.v0 + hit.u * (tri.v1 - tri.v0) + hit.v * (tri.v2 - tri.v0);
     // Written member by member, not as next = Ray{...}: GCC built that temporary with small stores and copied it
-    // with one 32-byte load, which waited for them (a failed store forward, 13% of this loop's samples with
-    // canopy's kernels, which read the ray from memory; Embree's copy reads the members one by one).
+    // with one 32-byte load, which waited for them: a failed store forward that stalled canopy's kernels, which read
+    // the ray from memory (docs/results.md#traversal-kernels; Embree's copy reads the members one by one).
     next.org = offset_ray_origin(p, n, triangle_point_error(tri));
     next.dir = cosine_direction(n, rng.next_float(), rng.next_float());
     next.tmin = 0.0f;

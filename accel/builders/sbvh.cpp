@@ -21,8 +21,8 @@ using spatial_binning::AxisBins;
 using spatial_binning::SpatialAxis;
 
 // Spatial bins per axis. Clipping a reference into every bin it spans is the expensive part of SBVH: 12 bins on
-// each of the three axes, as Stich et al. bin them. On crytek-sponza the largest axis alone built 1.9x faster but
-// its trees tested 5% more nodes and 3% more leaves a ray (bvh8 frames 1.078x Embree HIGH's against 1.014x).
+// each of the three axes, as Stich et al. bin them, since the largest axis alone built faster but made trees that
+// rays visit more of, for slower frames (docs/results.md#builds-and-layouts).
 constexpr uint32_t kSpatialBins = spatial_binning::kMaxBins;
 constexpr size_t kParallelBinningGrain = sah_binning::kParallelGrain;
 constexpr size_t kParallelSubtreeGrain = 4 * 1024;
@@ -170,8 +170,9 @@ private:
     }
 
     // Stich et al.: spatial bins over the node's bounds on each axis, a reference that spans several chopped into
-    // them (accel/spatial_binning.h). The bins only price splits, so they are computed in float: exact clipping took
-    // 28% of a conference build, and the trees came out the same (split_spatially clips references exactly).
+    // them (accel/spatial_binning.h). The bins only price splits, so they are computed in float: exact clipping was
+    // a large share of a build, and the trees came out the same (split_spatially clips references exactly;
+    // docs/results.md#builds-and-layouts).
     // Small nodes get fewer: a bin per reference is enough.
     static uint32_t spatial_bins(uint32_t n) { return std::clamp<uint32_t>(n, 4, kSpatialBins); }
 
