@@ -2,6 +2,7 @@
 // `canopy render`: one scene, one accelerator, samples accumulated into an EXR (or a heat map of what primary
 // rays visit).
 #include "accel/memory_budget.h"
+#include "renderer/commands/command.h"
 #include "scenes/scene.h"
 
 #include <optional>
@@ -42,5 +43,7 @@ Scene load_scene_within_memory(const std::string& name, std::span<const BuildPla
                                std::optional<uint64_t> memory_limit);
 
 void run_render(RenderOptions options);
+// `canopy render`, its options and its run.
+void register_render(CLI::App& canopy);
 
 }  // namespace canopy

@@ -5,7 +5,9 @@
 #include "renderer/recorded_rays.h"
 #include "renderer/distributed.h"
 #include "renderer/commands/per_scene.h"
+#include "renderer/commands/render.h"
 
+#include <CLI/CLI.hpp>
 #include <OpenImageIO/imageio.h>
 #include <glm/gtc/matrix_transform.hpp>
 #include <nlohmann/json.hpp>
@@ -20,18 +22,9 @@
 namespace canopy {
 namespace {
 
-struct Row {
-    std::string builder;
-    std::string host;  // the machine that measured the row
-    double scalar_sah = 0, scalar_epo = 0, scalar_ns = 0;       // binary tree, scalar kernel
-    double sah = 0, epo = 0, lcv = 0, simd_ns = 0;              // the widest kernel's tree (binary, before collapse)
-    double wide_sah = 0, wide_epo = 0;                          // the same tree collapsed to the kernel's width
-    // --rotate (sec. 4.4): the widest kernel's tree of the rotated scene, traced with the rotated rays; NaN if not run.
-    double rotated_sah = std::nan(""), rotated_epo = std::nan(""), rotated_lcv = std::nan(""), rotated_ns = std::nan("");
-    // --permute-nodes (sec. 6): the same SIMD tree with its nodes shuffled in memory, and the original timed
-    // alternately with it.
-    double permuted_ns = std::nan(""), unpermuted_ns = std::nan("");
-};
+using Row = StudyRow;
+using Fit = StudyFit;
+using SceneResult = StudyScene;
 
 // Sec. 4.4: 45 degrees about the (1, 1, 1) axis, here through the scene's centre so the scene stays in view.
 struct Rotation {
@@ -107,11 +100,6 @@ std::vector<double> measured(const std::vector<Row>& rows, bool scalar) {
     return m;
 }
 
-struct Fit {
-    double alpha = 0, beta = 0;
-    std::optional<double> correlation;
-};
-
 constexpr int kGridSteps = 100;  // alpha and beta in steps of 0.01
 
 // The weights of eq. 6 (with_lcv false) or eq. 7 that maximise the correlation, over a 0.01 grid.
@@ -125,13 +113,6 @@ Fit best_fit(const std::vector<Row>& rows, bool scalar, bool with_lcv) {
         }
     return best;
 }
-
-struct SceneResult {
-    std::string scene;
-    std::vector<Row> rows;
-    std::optional<double> scalar_sah, simd_sah;
-    Fit scalar_epo, simd_epo, simd_lcv;
-};
 
 std::string corr(const std::optional<double>& c) {
     char text[32];
@@ -421,12 +402,10 @@ std::vector<SceneResult> study_scenes(const std::vector<std::string>& names, con
 
 }  // namespace
 
-namespace {
-
-nlohmann::json study_json(const std::vector<SceneResult>& results) {
-    const Fit fixed_scalar = fixed_fit(results, true, false), fixed_simd = fixed_fit(results, false, true);
+nlohmann::json study_json(const StudyResult& result) {
+    const Fit &fixed_scalar = result.fixed_scalar, &fixed_simd = result.fixed_simd;
     nlohmann::json scenes = nlohmann::json::array();
-    for (const SceneResult& s : results) {
+    for (const SceneResult& s : result.scenes) {
         nlohmann::json rows = nlohmann::json::array();
         for (const Row& r : s.rows) rows.push_back(row_json(r));
         scenes.push_back({{"scene", s.scene}, {"builders", rows},
@@ -444,15 +423,17 @@ nlohmann::json study_json(const std::vector<SceneResult>& results) {
                        {"scalar_average_correlation", json_or_null(fixed_scalar.correlation)}}}};
 }
 
-void report_study(const std::vector<SceneResult>& results, const StudyOptions& o) {
-    const Fit fixed_scalar = fixed_fit(results, true, false), fixed_simd = fixed_fit(results, false, true);
-    print_tables(results, fixed_scalar, fixed_simd);
+namespace {
+
+void report_study(const StudyResult& result, const StudyOptions& o) {
+    const std::vector<SceneResult>& results = result.scenes;
+    print_tables(results, result.fixed_scalar, result.fixed_simd);
     if (o.rotate) print_rotation_table(results);
     if (o.permute_nodes) print_permutation_table(results);
     if (!o.plot_path.empty()) write_plot(results, o.plot_path), std::printf("wrote %s\n", o.plot_path.c_str());
     if (o.json_path.empty()) return;
     std::ofstream out(o.json_path);
-    out << study_json(results).dump(2) << "\n";
+    out << study_json(result).dump(2) << "\n";
     if (!out) throw std::runtime_error(o.json_path + ": cannot write the study JSON");
     std::printf("wrote %s\n", o.json_path.c_str());
 }
@@ -466,17 +447,40 @@ std::vector<std::string> builder_names_of(const StudyOptions& o) {
 
 }  // namespace
 
-nlohmann::json measure_study(const StudyOptions& o) {
-    const std::vector<SceneResult> results = study_scenes(builder_names_of(o), o);
-    nlohmann::json j;
+StudyResult measure_study(const StudyOptions& o) {
+    StudyResult result;
+    result.scenes = study_scenes(builder_names_of(o), o);
     distributed::checked([&] {
         if (!distributed::is_root()) return;
-        report_study(results, o);
-        j = study_json(results);
+        result.fixed_scalar = fixed_fit(result.scenes, true, false), result.fixed_simd = fixed_fit(result.scenes, false, true);
+        report_study(result, o);
     });
-    return j;
+    return result;
 }
 
 void run_study(const StudyOptions& o) { measure_study(o); }
+
+void register_study(CLI::App& canopy) {
+    auto st = std::make_shared<StudyOptions>();
+    auto size = std::make_shared<std::vector<int>>(std::vector<int>{st->width, st->height});
+    CLI::App* study = canopy.add_subcommand("study", "SAH, EPO and LCV against measured ns/ray for every builder (Aila et al. 2013)");
+    study->add_option("scenes", st->scenes, "Scenes: scene.json, .obj, .gltf, .glb or gen:NAME?tris=N&seed=S")->required();
+    study->add_option("--builder", st->builders, "Builders (default: every BVH builder): " + builder_names())->delimiter(',');
+    study->add_option("--size", *size, "Width and height of the frame whose diffuse rays are timed")
+        ->expected(2)->check(CLI::Range(1, 16384))->capture_default_str();
+    study->add_option("--repeats", st->repeats, "Timing passes per tree (fastest kept)")->check(CLI::Range(1, 100))->capture_default_str();
+    study->add_option("--json", st->json_path, "Write results as JSON");
+    study->add_flag("--rotate", st->rotate, "Also each builder on the scene and rays rotated 45 degrees about (1, 1, 1) (sec. 4.4)");
+    study->add_flag("--permute-nodes", st->permute_nodes, "Also each SIMD tree with its nodes shuffled in memory (sec. 6)");
+    study->add_option("--permute-seed", st->permute_seed, "Seed of --permute-nodes' shuffle")->capture_default_str();
+    study->add_option("--plot", st->plot_path, "Write a PNG: predicted (eq. 7) against measured SIMD ns/ray, a panel per scene");
+    study->callback([st, size] {
+        distributed::checked([&] {
+            for (const std::string& b : st->builders) check_builder_name(b);  // unknown names fail before any work
+        });
+        st->width = (*size)[0], st->height = (*size)[1];
+        run_study(*st);
+    });
+}
 
 }  // namespace canopy
