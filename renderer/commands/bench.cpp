@@ -742,7 +742,7 @@ namespace {
 
 // JSON writes a NaN or a missing figure as null: read back as NaN.
 double number_or_nan(const nlohmann::json& row, const char* key) {
-    return row.contains(key) && row[key].is_number() ? row[key].get<double>() : std::nan("");
+    return row.contains(key) && row[key].is_number() ? row[key].get<double>() : BenchRow::kNone;
 }
 
 // A row of results_json or dynamic_json, read back after run_per_scene gathered it.

@@ -6,6 +6,7 @@
 #include <nlohmann/json.hpp>
 
 #include <cstdint>
+#include <limits>
 #include <optional>
 #include <string>
 #include <vector>
@@ -64,9 +65,11 @@ struct BenchRow {
     int threads = 0;      // static benches: the --threads value of the row (0: all)
     std::optional<double> rebraid_threshold;  // rebraid rows
     std::optional<std::string> esc_sa_max;    // esc rows
-    double build_ms_min, frame_ms_mean;       // dynamic benches: the first build, the render's mean
-    double sah, layout_sah, refs_per_tri, split_ms, bytes, top_level_ms, brefs, inner_per_ray, triangles_per_ray;
-    double rebuild_ms_mean, total_ms_mean;    // dynamic benches: per frame, after the object moved
+    static constexpr double kNone = std::numeric_limits<double>::quiet_NaN();
+    double build_ms_min = kNone, frame_ms_mean = kNone;  // dynamic benches: the first build, the render's mean
+    double sah = kNone, layout_sah = kNone, refs_per_tri = kNone, split_ms = kNone, bytes = kNone;
+    double top_level_ms = kNone, brefs = kNone, inner_per_ray = kNone, triangles_per_ray = kNone;
+    double rebuild_ms_mean = kNone, total_ms_mean = kNone;  // dynamic benches: per frame, after the object moved
 
     // "embree medium", or canopy's builder.
     std::string name() const { return accel == "embree" ? "embree " + quality : builder; }
