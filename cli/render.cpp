@@ -5,11 +5,13 @@
 
 #include "accel/builder.h"
 #include "kernels/dispatch.h"
+#include "experiments/command.h"
 #include "renderer/frames.h"
 #include "renderer/heatmap.h"
 #include "renderer/distributed.h"
 #include "renderer/sample_sum.h"
 
+#include <CLI/CLI.hpp>
 #include <unistd.h>
 
 #include <algorithm>
@@ -120,6 +122,49 @@ void run_render(RenderOptions o) {
                 o.output.c_str());
     if (const AutoChoice* choice = p.accel->auto_choice(); choice && o.explain)
         std::printf("auto: %s\n%s", p.accel->reason().c_str(), explain(*choice, p.accel->frames_planned()).c_str());
+}
+
+void register_render(CLI::App& canopy) {
+    auto r = std::make_shared<RenderOptions>();
+    CLI::App* render = canopy.add_subcommand("render", "Render a scene to an EXR");
+    render->add_option("scene", r->scene, "Scene: scene.json, .obj, .gltf, .glb or gen:NAME?tris=N&seed=S (default: embedded scene)");
+    render->add_option("-o,--output", r->output, "Output EXR")->capture_default_str();
+    render->add_option("--spp", r->spp, "Samples (frames) per pixel")->check(CLI::Range(1, 1 << 20))->capture_default_str();
+    render->add_option("--size", r->size, "Width and height")->expected(2)->check(CLI::Range(1, 16384))->capture_default_str();
+    render->add_option("--builder", r->builder, "Builder (of a BVH, or kdtree: a kd-tree): " + builder_names())->capture_default_str();
+    render->add_option("--start", r->start, "Optimisers: builder of the start tree (default: the optimiser's own)");
+    render->add_option("--toplevel", r->toplevel, "flat, two-level or rebraid")
+        ->check(CLI::IsMember({"flat", "two-level", "rebraid"}))->capture_default_str();
+    render->add_option("--blas-builder", r->blas_builder, "Two-level top levels: builder of every object BVH (default: --builder)");
+    render->add_option("--frames-planned", r->frames_planned, "Frames that --builder auto plans for (default: --spp)")
+        ->check(CLI::Range(1, 1 << 24));
+    render->add_flag("--explain", r->explain, "--builder auto: every candidate's predicted or measured build and frame time, and the choice");
+    render->add_option("--kernel", r->kernel, "Traversal kernel: auto (widest), bvh2, bvh4, bvh8")->capture_default_str();
+    render->add_option("--accel", r->accel, "canopy or embree")->check(CLI::IsMember({"canopy", "embree"}))->capture_default_str();
+    render->add_option("--embree-quality", r->embree_quality, "low, medium or high")->capture_default_str();
+    render->add_option("--bounces", r->bounces, "Maximum bounces")->check(CLI::Range(0, 1024))->capture_default_str();
+    render->add_option("--threads", r->threads, "Threads for every library (0: all)")->check(CLI::Range(0, 4096));
+    render->add_flag("--materials", r->material_albedo,
+                     "Use the materials: Kd or baseColorFactor as albedo, Ke or emissiveFactor as light (protocol: 0.8 grey, sky only)");
+    render->add_flag("--heatmap", r->heatmap,
+                     "Instead of rendering, write what primary rays visit: EXR channels inner, leaves, triangles, and a false-colour PNG beside it");
+    render->add_option("--traversal", r->traversal, "robust (padded slab test, Ize 2013) or fast")
+        ->check(CLI::IsMember({"robust", "fast"}))->capture_default_str();
+    render->add_option("--intersector", r->intersector, "watertight (Woop et al. 2013) or moller (Möller–Trumbore, fast)")
+        ->check(CLI::IsMember({"watertight", "moller"}))->capture_default_str();
+    render->add_option("--tracer", r->tracer, "single (one path at a time) or stream (each bounce's rays as one sorted batch)")
+        ->check(CLI::IsMember({"single", "stream"}))->capture_default_str();
+    render->add_option("--stream-paths", r->stream_paths, "Stream tracer: paths in flight per batch")
+        ->check(CLI::Range(1, 1 << 24))->capture_default_str();
+    render->add_option("--batch-traversal", r->batch_traversal, kBatchTraversalHelp)
+        ->check(CLI::IsMember({"single", "packet", "stream"}))->capture_default_str();
+    render->add_option("--memory-limit", r->memory_limit, kMemoryLimitHelp)->transform(CLI::AsSizeValue(false));
+    render->add_option("--collapse", r->collapse, kCollapseHelp)->check(CLI::IsMember({"optimal", "greedy", "direct"}));
+    render->add_option("--layout", r->layout, kLayoutHelp)->check(CLI::IsMember({"standard", "compressed"}))->capture_default_str();
+    render->callback([r] {
+        const auto limit = limit_threads(r->threads);
+        run_render(*r);
+    });
 }
 
 }  // namespace canopy

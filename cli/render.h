@@ -1,6 +1,7 @@
 #pragma once
 // `canopy render`: one scene, one accelerator, samples accumulated into an EXR (or a heat map of what primary
 // rays visit).
+#include "experiments/command.h"
 #include "scenes/scene.h"
 
 #include <optional>
@@ -29,5 +30,7 @@ struct RenderOptions {
 };
 
 void run_render(RenderOptions options);
+// `canopy render`, its options and its run.
+void register_render(CLI::App& canopy);
 
 }  // namespace canopy

@@ -1,8 +1,12 @@
 #include "experiments/accuracy.h"
 
-#include "renderer/frames.h"
+#include "engine/options.h"
+#include "experiments/command.h"
 #include "experiments/plot.h"
+#include "renderer/distributed.h"
+#include "renderer/frames.h"
 
+#include <CLI/CLI.hpp>
 #include <glm/vec3.hpp>
 #include <nlohmann/json.hpp>
 #include <tbb/parallel_for.h>
@@ -11,6 +15,7 @@
 #include <chrono>
 #include <cstdio>
 #include <fstream>
+#include <memory>
 #include <random>
 #include <stdexcept>
 
@@ -182,6 +187,26 @@ void run_accuracy(const AccuracyOptions& o) {
     print_table(rows);
     if (!o.json_path.empty()) write_json(rows, o.json_path), std::printf("wrote %s\n", o.json_path.c_str());
     if (!o.plot_path.empty()) write_plot(rows, o.plot_path), std::printf("wrote %s\n", o.plot_path.c_str());
+}
+
+void register_accuracy(CLI::App& canopy) {
+    struct Parsed {
+        AccuracyOptions options;
+        int threads = 0;
+    };
+    auto p = std::make_shared<Parsed>();
+    AccuracyOptions& ac = p->options;
+    CLI::App* accuracy = canopy.add_subcommand("accuracy", "Leaks and hit-distance error of every intersector and traversal mode, scaled and moved");
+    accuracy->add_option("--builder", ac.builder, "Builder (of a BVH, or kdtree: a kd-tree): " + builder_names())->capture_default_str();
+    accuracy->add_option("--kernel", ac.kernel, "Kernel: auto (widest), bvh2, bvh4, bvh8")->capture_default_str();
+    accuracy->add_option("--rays", ac.rays, "Rays per case and mode")->check(CLI::Range(1, 100000000))->capture_default_str();
+    accuracy->add_option("--json", ac.json_path, "Write the rows as JSON");
+    accuracy->add_option("--plot", ac.plot_path, "Write a PNG: distance error against coordinate magnitude");
+    accuracy->add_option("--threads", p->threads, "Threads (0: all)")->check(CLI::Range(0, 4096));
+    accuracy->callback([p] {
+        const auto limit = limit_threads(p->threads);
+        if (distributed::is_root()) run_accuracy(p->options);  // not split: under a job, rank 0's alone
+    });
 }
 
 }  // namespace canopy

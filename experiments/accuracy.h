@@ -4,6 +4,7 @@
 // intersector and traversal mode. Leaks per million rays, hit-distance error against a double-precision oracle.
 #include "base/geometry.h"
 #include "kernels/ray.h"
+#include "experiments/command.h"
 
 #include <span>
 #include <string>
@@ -53,5 +54,7 @@ std::vector<AccuracyRow> measure_accuracy(const AccuracyOptions& options, const 
 
 // Measures every case, prints the table, writes JSON and the plot when asked.
 void run_accuracy(const AccuracyOptions& options);
+// `canopy accuracy`, its options and its run.
+void register_accuracy(CLI::App& canopy);
 
 }  // namespace canopy

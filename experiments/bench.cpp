@@ -5,12 +5,14 @@
 #include "kernels/dispatch.h"
 #include "renderer/frames.h"
 #include "renderer/distributed.h"
+#include "engine/options.h"
+#include "experiments/command.h"
 #include "experiments/dynamic.h"
 #include "experiments/per_scene.h"
-#include "engine/options.h"
 #include "renderer/progress.h"
 #include "renderer/wavefront.h"
 
+#include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 #include <tbb/global_control.h>
 
@@ -605,7 +607,116 @@ nlohmann::json bench_scene(const BenchOptions& o, LoadedScene& loaded, SceneRepo
     return bench_static(o, loaded, out);
 }
 
+// What `canopy bench` parses besides BenchOptions itself: the values that become its fields once parsed.
+struct BenchCommand {
+    BenchOptions options;
+    std::vector<std::string> scenes, accels, qualities{"medium"};
+    std::string dynamic;
+    std::vector<int> size{1024, 768};
+    CLI::Option *dynamic_option = nullptr, *rebraid_option = nullptr, *sa_max_option = nullptr, *alpha_option = nullptr;
+};
+
+// Options that take each value once, for a row each or the whole run.
+void add_row_options(CLI::App& bench, BenchCommand& c) {
+    BenchOptions& b = c.options;
+    bench.add_option("--builder", b.builders, "Builders: " + builder_names())->delimiter(',')->capture_default_str();
+    bench.add_option("--start", b.start, "Optimisers among the builders: builder of their start tree");
+    bench.add_option("--toplevel", b.toplevels, "Top levels: flat, two-level (object BVHs under a BVH over instances), rebraid (Benthin 2017)")
+        ->delimiter(',')->check(CLI::IsMember({"flat", "two-level", "rebraid"}))->capture_default_str();
+    c.rebraid_option = bench.add_option("--rebraid-threshold", b.rebraid_thresholds,
+                      "Rebraid rows: open BRefs wider than this share of their segment's extent, 0 to 1 (sec. 4.2); a row each")
+        ->delimiter(',')->check(CLI::Range(0.0, 1.0))->capture_default_str();
+    c.sa_max_option = bench.add_option("--esc-sa-max", b.esc_sa_max,
+                      "esc rows: SA_max of early split clipping, a row each: auto, a box area (12.5) or a multiple of the "
+                      "median ideal triangle area (8x)")
+        ->delimiter(',')->capture_default_str();
+    c.alpha_option = bench.add_option("--sbvh-alpha", b.sbvh_alpha,
+                      "sbvh rows: spatial splits only where object splits overlap by more than this share of the root's "
+                      "area (Stich et al. 2009 and the quality-metrics paper: 1e-5)")
+        ->check(CLI::NonNegativeNumber)->capture_default_str();
+    bench.add_option("--blas-builder", b.blas_builders,
+                      "Two-level top levels: builders of the object BVHs, a row each (default: the --builder list)")
+        ->delimiter(',');
+    bench.add_option("--frames-planned", b.frames_planned, "Frames that --builder auto plans time to image for (a row each)")
+        ->delimiter(',')->check(CLI::Range(1, 1 << 24))->capture_default_str();
+    bench.add_flag("--explain", b.explain, "--builder auto: every candidate's predicted or measured build and frame time, and the choice");
+    bench.add_option("--kernel", b.kernels, "Kernels: auto (widest), bvh2, bvh4, bvh8")->delimiter(',')->capture_default_str();
+    bench.add_option("--accel", c.accels, "Reference accelerators in the same run: embree")->delimiter(',')
+        ->check(CLI::IsMember({"embree"}));
+    bench.add_option("--embree-quality", c.qualities, "Embree qualities: low, medium, high")->delimiter(',')
+        ->check(CLI::IsMember({"low", "medium", "high"}))->capture_default_str();
+    bench.add_option("--traversal", b.traversals, "Traversal modes: robust, fast")->delimiter(',')
+        ->check(CLI::IsMember({"robust", "fast"}))->capture_default_str();
+    bench.add_option("--intersector", b.intersectors, "Intersectors: watertight, moller (Möller–Trumbore)")->delimiter(',')
+        ->check(CLI::IsMember({"watertight", "moller"}))->capture_default_str();
+    bench.add_option("--collapse", b.collapses, std::string(kCollapseHelp) + "; a row each")
+        ->delimiter(',')->check(CLI::IsMember({"optimal", "greedy", "direct"}));
+    bench.add_option("--layout", b.layouts, std::string(kLayoutHelp) + "; a row each")
+        ->delimiter(',')->check(CLI::IsMember({"standard", "compressed"}))->capture_default_str();
+    bench.add_option("--tracer", b.tracers, "Tracers: single (one path at a time), stream (each bounce's rays as one sorted batch)")
+        ->delimiter(',')->check(CLI::IsMember({"single", "stream"}))->capture_default_str();
+    bench.add_option("--batch-traversal", b.batch_traversals, std::string(kBatchTraversalHelp) + "; a stream row each")
+        ->delimiter(',')->check(CLI::IsMember({"single", "packet", "stream"}))->capture_default_str();
+    bench.add_option("--embree-stream", b.embree_streams,
+                      "Stream tracer: Embree's batch interface, a stream row each: 1m (rtcIntersect1M, incoherent), 16 (rtcIntersect16 packets)")
+        ->delimiter(',')->check(CLI::IsMember({"1m", "16"}))->capture_default_str();
+}
+
+// The protocol's options: how much is measured, and how.
+void add_protocol_options(CLI::App& bench, BenchCommand& c) {
+    BenchOptions& b = c.options;
+    bench.add_option("--builds", b.builds, "Builds (minimum reported)")->check(CLI::Range(1, 10000))->capture_default_str();
+    bench.add_option("--frames", b.frames, "Timed frames after one warm-up")->check(CLI::Range(1, 10000))->capture_default_str();
+    bench.add_option("--bounces", b.bounces, "Maximum bounces")->check(CLI::Range(0, 1024))->capture_default_str();
+    bench.add_option("--json", b.json_path, "Write results as JSON");
+    bench.add_flag("!--no-epo", b.epo, "Skip EPO in the report (minutes on millions of triangles)");
+    bench.add_option("--threads", b.threads, "Threads for every library (0: all); a list runs the whole bench once per count")
+        ->delimiter(',')->check(CLI::Range(0, 4096))->capture_default_str();
+    bench.add_flag("--materials", b.material_albedo, "Use the materials: Kd or baseColorFactor as albedo, Ke or emissiveFactor as light");
+    bench.add_option("--stream-paths", b.stream_paths, "Stream tracer: paths in flight per batch")
+        ->check(CLI::Range(1, 1 << 24))->capture_default_str();
+    c.dynamic_option =
+        bench.add_option("--dynamic", c.dynamic,
+                          "Dynamic-in-static (Benthin 2017, Table 3): this object moves every frame; each frame's rebuild "
+                          "and render are timed. An object or mesh name, a placement index, or auto (alone: the largest "
+                          "object spanning at most a quarter of the scene); --builds is then 1")
+            ->expected(0, 1)->default_str("auto");
+    bench.add_option("--memory-limit", b.memory_limit, kMemoryLimitHelp)->transform(CLI::AsSizeValue(false));
+    bench.add_option("--size", c.size, "Width and height")->expected(2)->check(CLI::Range(1, 16384))->capture_default_str();
+}
+
+bool contains_name(const std::vector<std::string>& list, const char* name) { return std::find(list.begin(), list.end(), name) != list.end(); }
+
+// The parsed values as BenchOptions, refused (on every rank) where options contradict each other.
+BenchOptions parsed_options(const BenchCommand& c) {
+    BenchOptions b = c.options;
+    b.width = c.size[0], b.height = c.size[1];
+    if (!c.accels.empty()) b.embree_qualities = c.qualities;
+    if (c.dynamic_option->count()) b.dynamic = c.dynamic;
+    distributed::checked([&] {
+        for (const std::string& blas : b.blas_builders) check_blas_builder(blas, b.toplevels);
+        if (c.rebraid_option->count() && !contains_name(b.toplevels, "rebraid"))
+            throw std::invalid_argument("--rebraid-threshold: only with --toplevel rebraid");
+        if (c.sa_max_option->count() && !contains_name(b.builders, "esc"))
+            throw std::invalid_argument("--esc-sa-max: only with --builder esc");
+        for (const std::string& value : b.esc_sa_max) parse_sa_max(value);
+        if (c.alpha_option->count() && !contains_name(b.builders, "sbvh") && !contains_name(b.blas_builders, "sbvh"))
+            throw std::invalid_argument("--sbvh-alpha: only with --builder sbvh");
+    });
+    return b;
+}
+
 }  // namespace
+
+void register_bench(CLI::App& canopy) {
+    auto c = std::make_shared<BenchCommand>();
+    CLI::App* bench = canopy.add_subcommand("bench", "Benchmark builders and kernels against Embree (BENCHMARK.md)");
+    bench->add_option("scenes", c->scenes, "Scenes, each benched in turn: scene.json, .obj, .gltf, .glb or gen:NAME?tris=N&seed=S")
+        ->required();
+    add_row_options(*bench, *c);
+    add_protocol_options(*bench, *c);
+    bench->callback([c] { run_bench(c->scenes, parsed_options(*c)); });
+}
 
 // Row by row as make_entries makes them. Rows that differ only by traversal mode, intersector or collapse are
 // separate builds of the same size; auto has a row per planned frame count (under the first top level only, as it
@@ -630,7 +741,35 @@ std::vector<BuildPlan> build_plans(const BenchOptions& o) {
     return plans;
 }
 
-std::vector<nlohmann::json> measure_bench(const std::vector<std::string>& scenes, const BenchOptions& o) {
+namespace {
+
+// JSON writes a NaN or a missing figure as null: read back as NaN.
+double number_or_nan(const nlohmann::json& row, const char* key) {
+    return row.contains(key) && row[key].is_number() ? row[key].get<double>() : BenchRow::kNone;
+}
+
+// A row of results_json or dynamic_json, read back after run_per_scene gathered it.
+BenchRow bench_row(const nlohmann::json& r) {
+    const auto text = [&](const char* key) { return r.at(key).is_string() ? r.at(key).get<std::string>() : std::string(); };
+    BenchRow row{text("accel"), text("builder"), text("quality")};
+    row.threads = r.contains("threads") ? r.at("threads").get<int>() : 0;
+    if (r.at("rebraid_threshold").is_number()) row.rebraid_threshold = r.at("rebraid_threshold").get<double>();
+    if (r.contains("esc_sa_max") && r.at("esc_sa_max").is_string()) row.esc_sa_max = r.at("esc_sa_max").get<std::string>();
+    const bool dynamic = r.contains("rebuild_ms_mean");
+    row.build_ms_min = number_or_nan(r, dynamic ? "first_build_ms" : "build_ms_min");
+    row.frame_ms_mean = number_or_nan(r, dynamic ? "render_ms_mean" : "frame_ms_mean");
+    row.sah = number_or_nan(r, "sah"), row.layout_sah = number_or_nan(r, "layout_sah");
+    row.refs_per_tri = number_or_nan(r, "refs_per_tri"), row.split_ms = number_or_nan(r, "split_ms");
+    row.bytes = number_or_nan(r, "bytes"), row.brefs = number_or_nan(r, "brefs");
+    row.top_level_ms = number_or_nan(r, dynamic ? "top_level_ms_last" : "top_level_ms");
+    row.inner_per_ray = number_or_nan(r, "inner_per_ray"), row.triangles_per_ray = number_or_nan(r, "triangles_per_ray");
+    row.rebuild_ms_mean = number_or_nan(r, "rebuild_ms_mean"), row.total_ms_mean = number_or_nan(r, "total_ms_mean");
+    return row;
+}
+
+}  // namespace
+
+std::vector<BenchScene> measure_bench(const std::vector<std::string>& scenes, const BenchOptions& o) {
     if (std::count(o.layouts.begin(), o.layouts.end(), "compressed") && std::count(o.tracers.begin(), o.tracers.end(), "stream"))
         throw std::invalid_argument("--layout compressed: the single-ray tracer only, not --tracer stream");
     const auto load = [&](const std::string& scene) -> SceneWork {
@@ -639,13 +778,26 @@ std::vector<nlohmann::json> measure_bench(const std::vector<std::string>& scenes
         const std::shared_ptr<LoadedScene> loaded = load_bench_scene(one);
         return [one, loaded](SceneReport& out) { return bench_scene(one, *loaded, out); };
     };
-    return run_per_scene(scenes, load);
+    std::vector<BenchScene> results;
+    for (nlohmann::json& json : run_per_scene(scenes, load)) {
+        BenchScene& scene = results.emplace_back(BenchScene{json.at("scene").get<std::string>(), {}, {}});
+        for (const nlohmann::json& row : json.at("results")) scene.rows.push_back(bench_row(row));
+        scene.json = std::move(json);
+    }
+    return results;
+}
+
+nlohmann::json bench_json(const std::vector<BenchScene>& scenes) {
+    nlohmann::json all = nlohmann::json::array();
+    for (const BenchScene& scene : scenes) all.push_back(scene.json);
+    return all;
 }
 
 void run_bench(const std::vector<std::string>& scenes, const BenchOptions& o) {
-    const std::vector<nlohmann::json> results = measure_bench(scenes, o);
+    const std::vector<BenchScene> results = measure_bench(scenes, o);
     distributed::checked([&] {
-        if (distributed::is_root()) write_json(results.size() == 1 ? results[0] : nlohmann::json{{"scenes", results}}, o.json_path);
+        if (!distributed::is_root()) return;
+        write_json(results.size() == 1 ? results[0].json : nlohmann::json{{"scenes", bench_json(results)}}, o.json_path);
     });
 }
 

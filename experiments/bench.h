@@ -1,10 +1,12 @@
 #pragma once
 #include "accel/memory_budget.h"
 #include "accel/two_level.h"
+#include "experiments/command.h"
 
 #include <nlohmann/json.hpp>
 
 #include <cstdint>
+#include <limits>
 #include <optional>
 #include <string>
 #include <vector>
@@ -55,8 +57,38 @@ void run_bench(const BenchOptions& options);
 // The same for each scene in turn; under a job of several ranks, each scene on one rank (per_scene.h). The JSON
 // is the one scene's, or {"scenes": [each scene's]}; every row names the host that measured it.
 void run_bench(const std::vector<std::string>& scenes, const BenchOptions& options);
-// run_bench's measurement and printed tables without the JSON file: on rank 0, each scene's JSON in the scenes'
-// order (other ranks: none). Collective.
-std::vector<nlohmann::json> measure_bench(const std::vector<std::string>& scenes, const BenchOptions& options);
+// A row of a bench's results, for commands that read them (the papers): NaN where the row has no such figure.
+struct BenchRow {
+    std::string accel;    // canopy or embree
+    std::string builder;  // canopy's: its builder, "two-level/binned" for a top level over object trees; else empty
+    std::string quality;  // Embree's: low, medium or high; else empty
+    int threads = 0;      // static benches: the --threads value of the row (0: all)
+    std::optional<double> rebraid_threshold;  // rebraid rows
+    std::optional<std::string> esc_sa_max;    // esc rows
+    static constexpr double kNone = std::numeric_limits<double>::quiet_NaN();
+    double build_ms_min = kNone, frame_ms_mean = kNone;  // dynamic benches: the first build, the render's mean
+    double sah = kNone, layout_sah = kNone, refs_per_tri = kNone, split_ms = kNone, bytes = kNone;
+    double top_level_ms = kNone, brefs = kNone, inner_per_ray = kNone, triangles_per_ray = kNone;
+    double rebuild_ms_mean = kNone, total_ms_mean = kNone;  // dynamic benches: per frame, after the object moved
+
+    // "embree medium", or canopy's builder.
+    std::string name() const { return accel == "embree" ? "embree " + quality : builder; }
+};
+
+// One scene's bench: its rows, and its JSON as --json writes it.
+struct BenchScene {
+    std::string scene;
+    std::vector<BenchRow> rows;
+    nlohmann::json json;
+};
+
+// run_bench's measurement and printed tables without the JSON file: on rank 0, each scene's results in the
+// scenes' order (other ranks: none). Collective.
+std::vector<BenchScene> measure_bench(const std::vector<std::string>& scenes, const BenchOptions& options);
+// The scenes' JSON, an array.
+nlohmann::json bench_json(const std::vector<BenchScene>& scenes);
+
+// `canopy bench`, its options and its run.
+void register_bench(CLI::App& canopy);
 
 }  // namespace canopy

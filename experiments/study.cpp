@@ -4,8 +4,11 @@
 #include "renderer/frames.h"
 #include "renderer/recorded_rays.h"
 #include "renderer/distributed.h"
+#include "engine/options.h"
 #include "experiments/per_scene.h"
+#include "renderer/progress.h"
 
+#include <CLI/CLI.hpp>
 #include <OpenImageIO/imageio.h>
 #include <glm/gtc/matrix_transform.hpp>
 #include <nlohmann/json.hpp>
@@ -19,19 +22,6 @@
 
 namespace canopy {
 namespace {
-
-struct Row {
-    std::string builder;
-    std::string host;  // the machine that measured the row
-    double scalar_sah = 0, scalar_epo = 0, scalar_ns = 0;       // binary tree, scalar kernel
-    double sah = 0, epo = 0, lcv = 0, simd_ns = 0;              // the widest kernel's tree (binary, before collapse)
-    double wide_sah = 0, wide_epo = 0;                          // the same tree collapsed to the kernel's width
-    // --rotate (sec. 4.4): the widest kernel's tree of the rotated scene, traced with the rotated rays; NaN if not run.
-    double rotated_sah = std::nan(""), rotated_epo = std::nan(""), rotated_lcv = std::nan(""), rotated_ns = std::nan("");
-    // --permute-nodes (sec. 6): the same SIMD tree with its nodes shuffled in memory, and the original timed
-    // alternately with it.
-    double permuted_ns = std::nan(""), unpermuted_ns = std::nan("");
-};
 
 // Sec. 4.4: 45 degrees about the (1, 1, 1) axis, here through the scene's centre so the scene stays in view.
 struct Rotation {
@@ -84,9 +74,9 @@ std::optional<double> pearson(const std::vector<double>& x, const std::vector<do
 }
 
 // (1 - alpha - beta) SAH + alpha EPO + beta LCV: eq. 7, and eq. 6 with beta = 0.
-std::vector<double> predicted(const std::vector<Row>& rows, bool scalar, double alpha, double beta) {
+std::vector<double> predicted(const std::vector<StudyRow>& rows, bool scalar, double alpha, double beta) {
     std::vector<double> p;
-    for (const Row& r : rows)
+    for (const StudyRow& r : rows)
         p.push_back(scalar ? (1 - alpha) * r.scalar_sah + alpha * r.scalar_epo
                            : (1 - alpha - beta) * r.sah + alpha * r.epo + beta * r.lcv);
     return p;
@@ -94,29 +84,24 @@ std::vector<double> predicted(const std::vector<Row>& rows, bool scalar, double 
 
 // The rows the fits are over: the BVHs'. Another structure family's rows (the kd-tree) are measured and listed,
 // but have no EPO or wide layout, and its SAH sums voxel areas, not the triangles' bounds.
-std::vector<Row> bvh_rows(const std::vector<Row>& rows) {
-    std::vector<Row> out;
-    for (const Row& r : rows)
+std::vector<StudyRow> bvh_rows(const std::vector<StudyRow>& rows) {
+    std::vector<StudyRow> out;
+    for (const StudyRow& r : rows)
         if (is_bvh_builder(r.builder)) out.push_back(r);
     return out;
 }
 
-std::vector<double> measured(const std::vector<Row>& rows, bool scalar) {
+std::vector<double> measured(const std::vector<StudyRow>& rows, bool scalar) {
     std::vector<double> m;
-    for (const Row& r : rows) m.push_back(scalar ? r.scalar_ns : r.simd_ns);
+    for (const StudyRow& r : rows) m.push_back(scalar ? r.scalar_ns : r.simd_ns);
     return m;
 }
-
-struct Fit {
-    double alpha = 0, beta = 0;
-    std::optional<double> correlation;
-};
 
 constexpr int kGridSteps = 100;  // alpha and beta in steps of 0.01
 
 // The weights of eq. 6 (with_lcv false) or eq. 7 that maximise the correlation, over a 0.01 grid.
-Fit best_fit(const std::vector<Row>& rows, bool scalar, bool with_lcv) {
-    Fit best;
+StudyFit best_fit(const std::vector<StudyRow>& rows, bool scalar, bool with_lcv) {
+    StudyFit best;
     for (int a = 0; a <= kGridSteps; ++a)
         for (int b = 0; b <= (with_lcv ? kGridSteps - a : 0); ++b) {
             const double alpha = a / double(kGridSteps), beta = b / double(kGridSteps);
@@ -125,13 +110,6 @@ Fit best_fit(const std::vector<Row>& rows, bool scalar, bool with_lcv) {
         }
     return best;
 }
-
-struct SceneResult {
-    std::string scene;
-    std::vector<Row> rows;
-    std::optional<double> scalar_sah, simd_sah;
-    Fit scalar_epo, simd_epo, simd_lcv;
-};
 
 std::string corr(const std::optional<double>& c) {
     char text[32];
@@ -142,13 +120,13 @@ std::string corr(const std::optional<double>& c) {
 nlohmann::json json_or_null(const std::optional<double>& c) { return c ? nlohmann::json(*c) : nlohmann::json(nullptr); }
 
 // Table 2's fixed parameters: the (alpha, beta) with the best average correlation over all scenes.
-Fit fixed_fit(const std::vector<SceneResult>& results, bool scalar, bool with_lcv) {
-    Fit best;
+StudyFit fixed_fit(const std::vector<StudyScene>& results, bool scalar, bool with_lcv) {
+    StudyFit best;
     for (int a = 0; a <= kGridSteps; ++a)
         for (int b = 0; b <= (with_lcv ? kGridSteps - a : 0); ++b) {
             double sum = 0;
             int counted = 0;
-            for (const SceneResult& s : results)
+            for (const StudyScene& s : results)
                 if (auto c = pearson(predicted(bvh_rows(s.rows), scalar, a / double(kGridSteps), b / double(kGridSteps)),
                                      measured(bvh_rows(s.rows), scalar)))
                     sum += *c, ++counted;
@@ -158,11 +136,11 @@ Fit fixed_fit(const std::vector<SceneResult>& results, bool scalar, bool with_lc
     return best;
 }
 
-void print_tables(const std::vector<SceneResult>& results, const Fit& fixed_scalar, const Fit& fixed_simd) {
+void print_tables(const std::vector<StudyScene>& results, const StudyFit& fixed_scalar, const StudyFit& fixed_simd) {
     std::printf("\nTable 1: per-scene correlation of predicted cost with measured ns/ray (Pearson, eq. 5)\n");
     std::printf("%-34s %9s | %7s %14s | %7s %14s %20s\n", "scene", "builders", "scalar", "scalar", "SIMD", "SIMD", "SIMD");
     std::printf("%-34s %9s | %7s %14s | %7s %14s %20s\n", "", "", "SAH", "SAH+EPO (a)", "SAH", "SAH+EPO (a)", "SAH+EPO+LCV (a,b)");
-    for (const SceneResult& s : results)
+    for (const StudyScene& s : results)
         std::printf("%-34s %9zu | %7s %7s (%.2f) | %7s %7s (%.2f) %11s (%.2f,%.2f)\n", s.scene.c_str(), s.rows.size(),
                     corr(s.scalar_sah).c_str(), corr(s.scalar_epo.correlation).c_str(), s.scalar_epo.alpha,
                     corr(s.simd_sah).c_str(), corr(s.simd_epo.correlation).c_str(), s.simd_epo.alpha,
@@ -170,16 +148,16 @@ void print_tables(const std::vector<SceneResult>& results, const Fit& fixed_scal
     auto summary = [&](const char* name, auto get) {
         double sum = 0, low = 1;
         int n = 0;
-        for (const SceneResult& s : results)
+        for (const StudyScene& s : results)
             if (auto c = get(s)) sum += *c, low = std::min(low, *c), ++n;
         if (n) std::printf("  %-34s average %.3f, minimum %.3f over %d scenes\n", name, sum / n, low, n);
     };
     std::printf("\nTable 2: aggregate correlations\n");
-    summary("scalar SAH", [](const SceneResult& s) { return s.scalar_sah; });
-    summary("scalar SAH+EPO (per-scene a)", [](const SceneResult& s) { return s.scalar_epo.correlation; });
-    summary("SIMD SAH", [](const SceneResult& s) { return s.simd_sah; });
-    summary("SIMD SAH+EPO (per-scene a)", [](const SceneResult& s) { return s.simd_epo.correlation; });
-    summary("SIMD SAH+EPO+LCV (per-scene a,b)", [](const SceneResult& s) { return s.simd_lcv.correlation; });
+    summary("scalar SAH", [](const StudyScene& s) { return s.scalar_sah; });
+    summary("scalar SAH+EPO (per-scene a)", [](const StudyScene& s) { return s.scalar_epo.correlation; });
+    summary("SIMD SAH", [](const StudyScene& s) { return s.simd_sah; });
+    summary("SIMD SAH+EPO (per-scene a)", [](const StudyScene& s) { return s.simd_epo.correlation; });
+    summary("SIMD SAH+EPO+LCV (per-scene a,b)", [](const StudyScene& s) { return s.simd_lcv.correlation; });
     std::printf("  fixed over all scenes: scalar SAH+EPO a = %.2f (average %s); SIMD SAH+EPO+LCV a = %.2f, b = %.2f (average %s)\n",
                 fixed_scalar.alpha, corr(fixed_scalar.correlation).c_str(), fixed_simd.alpha, fixed_simd.beta,
                 corr(fixed_simd.correlation).c_str());
@@ -199,18 +177,18 @@ std::string change_text(double percent, int width) {
 // Sec. 4.4's composite estimate: eq. 6 with the paper's average SIMD alpha (0.50), on costs relative to the
 // unrotated tree's, so that SAH and EPO weigh by their change, not their scale.
 constexpr double kPaperSimdAlpha = 0.50;
-double composite_change(const Row& r) {
+double composite_change(const StudyRow& r) {
     return 100.0 * ((1.0 - kPaperSimdAlpha) * r.rotated_sah / r.sah + kPaperSimdAlpha * r.rotated_epo / r.epo - 1.0);
 }
 
 // Sec. 4.4: what rotating scene and rays 45 degrees about (1, 1, 1) costs each builder, measured and predicted.
-void print_rotation_table(const std::vector<SceneResult>& results) {
+void print_rotation_table(const std::vector<StudyScene>& results) {
     std::printf("\nSec. 4.4: scene and rays rotated 45 degrees about (1, 1, 1), change against the unrotated tree\n");
     std::printf("%-34s %-10s %10s %8s %8s %8s %11s\n", "scene", "builder", "SIMD time", "SAH", "EPO", "LCV", "eq. 6 a=.5");
     double time = 0, sah = 0, epo = 0, composite = 0;
     int n = 0;
-    for (const SceneResult& s : results)
-        for (const Row& r : s.rows) {
+    for (const StudyScene& s : results)
+        for (const StudyRow& r : s.rows) {
             if (std::isnan(r.rotated_ns)) continue;
             std::printf("%-34s %-10s %s %s %s %s %s\n", s.scene.c_str(), r.builder.c_str(),
                         change_text(percent_change(r.rotated_ns, r.simd_ns), 10).c_str(),
@@ -229,14 +207,14 @@ void print_rotation_table(const std::vector<SceneResult>& results) {
 }
 
 // Sec. 6: the same trees with their nodes shuffled in memory.
-void print_permutation_table(const std::vector<SceneResult>& results) {
+void print_permutation_table(const std::vector<StudyScene>& results) {
     std::printf("\nSec. 6: wide nodes permuted at random in memory, SIMD time against the builder's own node order (timed "
                 "alternately)\n");
     std::printf("%-34s %-10s %10s %10s %10s\n", "scene", "builder", "ns/ray", "permuted", "change");
     double sum = 0;
     int n = 0;
-    for (const SceneResult& s : results)
-        for (const Row& r : s.rows) {
+    for (const StudyScene& s : results)
+        for (const StudyRow& r : s.rows) {
             if (std::isnan(r.permuted_ns)) continue;
             std::printf("%-34s %-10s %10.1f %10.1f %+9.1f%%\n", s.scene.c_str(), r.builder.c_str(), r.unpermuted_ns,
                         r.permuted_ns, percent_change(r.permuted_ns, r.unpermuted_ns));
@@ -249,7 +227,7 @@ void print_permutation_table(const std::vector<SceneResult>& results) {
 
 // One panel per scene: predicted SIMD cost (eq. 7 with the scene's fit) against measured SIMD ns/ray,
 // both scaled to the panel, one white square per builder, on a grey diagonal.
-void write_plot(const std::vector<SceneResult>& results, const std::string& path) {
+void write_plot(const std::vector<StudyScene>& results, const std::string& path) {
     constexpr int kPanel = 240, kMargin = 20;
     const int width = kPanel * int(results.size()), height = kPanel;
     std::vector<uint8_t> rgb(size_t(width) * size_t(height) * 3, 24);
@@ -259,7 +237,7 @@ void write_plot(const std::vector<SceneResult>& results, const std::string& path
     };
     for (size_t s = 0; s < results.size(); ++s) {
         const int x0 = int(s) * kPanel;
-        const std::vector<Row> rows = bvh_rows(results[s].rows);
+        const std::vector<StudyRow> rows = bvh_rows(results[s].rows);
         const std::vector<double> p = predicted(rows, false, results[s].simd_lcv.alpha, results[s].simd_lcv.beta);
         const std::vector<double> m = measured(rows, false);
         const auto [pmin, pmax] = std::minmax_element(p.begin(), p.end());
@@ -295,7 +273,7 @@ double leaf_count_variability(const Accelerator& accel, const std::vector<Ray>& 
 
 namespace {
 
-nlohmann::json row_json(const Row& r) {
+nlohmann::json row_json(const StudyRow& r) {
     return {{"builder", r.builder}, {"host", r.host}, {"sah", r.sah}, {"epo", r.epo}, {"lcv", r.lcv},
             {"scalar_ns_per_ray", r.scalar_ns}, {"simd_ns_per_ray", r.simd_ns},
             {"scalar_sah", r.scalar_sah}, {"scalar_epo", r.scalar_epo},
@@ -319,7 +297,7 @@ double number(const nlohmann::json& j, const char* key) {
     return j.at(key).is_null() ? std::nan("") : j.at(key).get<double>();
 }
 
-Row row_from_json(const nlohmann::json& j) {
+StudyRow row_from_json(const nlohmann::json& j) {
     return {j.at("builder"), j.at("host"), number(j, "scalar_sah"), number(j, "scalar_epo"), number(j, "scalar_ns_per_ray"),
             number(j, "sah"), number(j, "epo"), number(j, "lcv"), number(j, "simd_ns_per_ray"), number(j, "wide_sah"),
             number(j, "wide_epo"), number(j, "rotated_sah"), number(j, "rotated_epo"), number(j, "rotated_lcv"),
@@ -328,7 +306,7 @@ Row row_from_json(const nlohmann::json& j) {
 }
 
 // Sec. 4.4: the row's builder on the rotated scene, its SIMD tree timed with the rotated rays.
-void measure_rotated(Row& row, const FlatScene& rotated, const std::vector<Ray>& rays, const StudyOptions& o,
+void measure_rotated(StudyRow& row, const FlatScene& rotated, const std::vector<Ray>& rays, const StudyOptions& o,
                      SceneReport& report) {
     auto simd = make_canopy_accelerator(rotated, study_options(row.builder, "auto"));
     simd->prepare(), simd->build();
@@ -342,7 +320,7 @@ void measure_rotated(Row& row, const FlatScene& rotated, const std::vector<Ray>&
 
 // Sec. 6: the row's SIMD tree again, its nodes shuffled in memory, timed with the same rays alternately with
 // `original`.
-void measure_permuted(Row& row, const Accelerator& original, const FlatScene& flat, const std::vector<Ray>& rays,
+void measure_permuted(StudyRow& row, const Accelerator& original, const FlatScene& flat, const std::vector<Ray>& rays,
                       const StudyOptions& o, SceneReport& report) {
     CanopyOptions options = study_options(row.builder, "auto");
     options.permute_nodes = o.permute_seed;
@@ -354,7 +332,7 @@ void measure_permuted(Row& row, const Accelerator& original, const FlatScene& fl
 }
 
 // One scene's rows, every builder's trees built and timed in this process.
-SceneResult study_scene(const std::string& scene_name, const Scene& scene, const FlatScene& flat,
+StudyScene study_scene(const std::string& scene_name, const Scene& scene, const FlatScene& flat,
                         const std::vector<std::string>& names, const StudyOptions& o, SceneReport& report) {
     const PinholeCamera camera(scene_camera(scene, flat), o.width, o.height);
     auto reference = make_canopy_accelerator(flat, {"binned", "", "auto"});
@@ -363,7 +341,7 @@ SceneResult study_scene(const std::string& scene_name, const Scene& scene, const
     const std::vector<Ray> rays = diffuse_rays(*reference, flat, camera, o.width, o.height);
     report.printf("%s: %zu triangles, %zu diffuse rays (%dx%d, %d bounces)%s\n", scene_name.c_str(), flat.triangles.size(),
                   rays.size(), o.width, o.height, FrameSettings{}.max_bounces, distributed::where().c_str());
-    SceneResult result{scene.name.empty() ? scene_name : scene.name, {}, {}, {}, {}, {}, {}};
+    StudyScene result{scene.name.empty() ? scene_name : scene.name, {}, {}, {}, {}, {}, {}};
     const Rotation rotation{.pivot = flat.bounds.center()};
     const std::optional<FlatScene> rotated = o.rotate ? std::optional(rotation.scene(flat)) : std::nullopt;
     std::vector<Ray> rotated_rays;
@@ -375,9 +353,9 @@ SceneResult study_scene(const std::string& scene_name, const Scene& scene, const
         for (Accelerator* a : {scalar.get(), simd.get()}) a->prepare(), a->build();
         const AcceleratorReport rs = scalar->report(true), rw = simd->report(true);
         const double none = std::nan("");  // what another structure family does not define (EPO, wide layouts)
-        Row row{name, distributed::host(), rs.sah.value_or(none), rs.epo.value_or(none), ns_per_ray(*scalar, rays, o.repeats),
-                rw.sah.value_or(none), rw.epo.value_or(none), leaf_count_variability(*simd, rays), ns_per_ray(*simd, rays, o.repeats),
-                rw.layout_sah.value_or(none), rw.layout_epo.value_or(none)};
+        StudyRow row{name, distributed::host(), rs.sah.value_or(none), rs.epo.value_or(none), ns_per_ray(*scalar, rays, o.repeats),
+                     rw.sah.value_or(none), rw.epo.value_or(none), leaf_count_variability(*simd, rays), ns_per_ray(*simd, rays, o.repeats),
+                     rw.layout_sah.value_or(none), rw.layout_epo.value_or(none)};
         report.printf("  %-8s scalar: SAH %7.2f EPO %7.2f %7.1f ns/ray | %s: SAH %7.2f EPO %7.2f LCV %6.2f %7.1f ns/ray\n",
                       name.c_str(), row.scalar_sah, row.scalar_epo, row.scalar_ns, simd->kernel().c_str(), row.sah,
                       row.epo, row.lcv, row.simd_ns);
@@ -389,8 +367,8 @@ SceneResult study_scene(const std::string& scene_name, const Scene& scene, const
     return result;
 }
 
-void fit(SceneResult& result) {
-    const std::vector<Row> rows = bvh_rows(result.rows);
+void fit(StudyScene& result) {
+    const std::vector<StudyRow> rows = bvh_rows(result.rows);
     result.scalar_sah = pearson(predicted(rows, true, 0, 0), measured(rows, true));
     result.simd_sah = pearson(predicted(rows, false, 0, 0), measured(rows, false));
     result.scalar_epo = best_fit(rows, true, false);
@@ -399,20 +377,20 @@ void fit(SceneResult& result) {
 }
 
 // Every scene's rows, on rank 0 (under a job, each scene measured by one rank: per_scene.h), and their fits.
-std::vector<SceneResult> study_scenes(const std::vector<std::string>& names, const StudyOptions& o) {
+std::vector<StudyScene> study_scenes(const std::vector<std::string>& names, const StudyOptions& o) {
     const auto load = [&](const std::string& scene_name) -> SceneWork {
         const auto scene = std::make_shared<const Scene>(load_scene(scene_name));
         const auto flat = std::make_shared<const FlatScene>(flatten(*scene));
         return [&, scene_name, scene, flat](SceneReport& report) {
-            const SceneResult result = study_scene(scene_name, *scene, *flat, names, o, report);
+            const StudyScene result = study_scene(scene_name, *scene, *flat, names, o, report);
             nlohmann::json rows = nlohmann::json::array();
-            for (const Row& r : result.rows) rows.push_back(row_json(r));
+            for (const StudyRow& r : result.rows) rows.push_back(row_json(r));
             return nlohmann::json{{"scene", result.scene}, {"rows", rows}};
         };
     };
-    std::vector<SceneResult> results;
+    std::vector<StudyScene> results;
     for (const nlohmann::json& scene : run_per_scene(o.scenes, load)) {
-        SceneResult& r = results.emplace_back();
+        StudyScene& r = results.emplace_back();
         r.scene = scene.at("scene");
         for (const nlohmann::json& row : scene.at("rows")) r.rows.push_back(row_from_json(row));
         fit(r);
@@ -422,14 +400,12 @@ std::vector<SceneResult> study_scenes(const std::vector<std::string>& names, con
 
 }  // namespace
 
-namespace {
-
-nlohmann::json study_json(const std::vector<SceneResult>& results) {
-    const Fit fixed_scalar = fixed_fit(results, true, false), fixed_simd = fixed_fit(results, false, true);
+nlohmann::json study_json(const StudyResult& result) {
+    const StudyFit &fixed_scalar = result.fixed_scalar, &fixed_simd = result.fixed_simd;
     nlohmann::json scenes = nlohmann::json::array();
-    for (const SceneResult& s : results) {
+    for (const StudyScene& s : result.scenes) {
         nlohmann::json rows = nlohmann::json::array();
-        for (const Row& r : s.rows) rows.push_back(row_json(r));
+        for (const StudyRow& r : s.rows) rows.push_back(row_json(r));
         scenes.push_back({{"scene", s.scene}, {"builders", rows},
                           {"correlation", {{"sah", json_or_null(s.simd_sah)}, {"sah_epo", json_or_null(s.simd_epo.correlation)},
                                            {"sah_epo_alpha", s.simd_epo.alpha},
@@ -445,15 +421,17 @@ nlohmann::json study_json(const std::vector<SceneResult>& results) {
                        {"scalar_average_correlation", json_or_null(fixed_scalar.correlation)}}}};
 }
 
-void report_study(const std::vector<SceneResult>& results, const StudyOptions& o) {
-    const Fit fixed_scalar = fixed_fit(results, true, false), fixed_simd = fixed_fit(results, false, true);
-    print_tables(results, fixed_scalar, fixed_simd);
+namespace {
+
+void report_study(const StudyResult& result, const StudyOptions& o) {
+    const std::vector<StudyScene>& results = result.scenes;
+    print_tables(results, result.fixed_scalar, result.fixed_simd);
     if (o.rotate) print_rotation_table(results);
     if (o.permute_nodes) print_permutation_table(results);
     if (!o.plot_path.empty()) write_plot(results, o.plot_path), std::printf("wrote %s\n", o.plot_path.c_str());
     if (o.json_path.empty()) return;
     std::ofstream out(o.json_path);
-    out << study_json(results).dump(2) << "\n";
+    out << study_json(result).dump(2) << "\n";
     if (!out) throw std::runtime_error(o.json_path + ": cannot write the study JSON");
     std::printf("wrote %s\n", o.json_path.c_str());
 }
@@ -467,17 +445,40 @@ std::vector<std::string> builder_names_of(const StudyOptions& o) {
 
 }  // namespace
 
-nlohmann::json measure_study(const StudyOptions& o) {
-    const std::vector<SceneResult> results = study_scenes(builder_names_of(o), o);
-    nlohmann::json j;
+StudyResult measure_study(const StudyOptions& o) {
+    StudyResult result;
+    result.scenes = study_scenes(builder_names_of(o), o);
     distributed::checked([&] {
         if (!distributed::is_root()) return;
-        report_study(results, o);
-        j = study_json(results);
+        result.fixed_scalar = fixed_fit(result.scenes, true, false), result.fixed_simd = fixed_fit(result.scenes, false, true);
+        report_study(result, o);
     });
-    return j;
+    return result;
 }
 
 void run_study(const StudyOptions& o) { measure_study(o); }
+
+void register_study(CLI::App& canopy) {
+    auto st = std::make_shared<StudyOptions>();
+    auto size = std::make_shared<std::vector<int>>(std::vector<int>{st->width, st->height});
+    CLI::App* study = canopy.add_subcommand("study", "SAH, EPO and LCV against measured ns/ray for every builder (Aila et al. 2013)");
+    study->add_option("scenes", st->scenes, "Scenes: scene.json, .obj, .gltf, .glb or gen:NAME?tris=N&seed=S")->required();
+    study->add_option("--builder", st->builders, "Builders (default: every BVH builder): " + builder_names())->delimiter(',');
+    study->add_option("--size", *size, "Width and height of the frame whose diffuse rays are timed")
+        ->expected(2)->check(CLI::Range(1, 16384))->capture_default_str();
+    study->add_option("--repeats", st->repeats, "Timing passes per tree (fastest kept)")->check(CLI::Range(1, 100))->capture_default_str();
+    study->add_option("--json", st->json_path, "Write results as JSON");
+    study->add_flag("--rotate", st->rotate, "Also each builder on the scene and rays rotated 45 degrees about (1, 1, 1) (sec. 4.4)");
+    study->add_flag("--permute-nodes", st->permute_nodes, "Also each SIMD tree with its nodes shuffled in memory (sec. 6)");
+    study->add_option("--permute-seed", st->permute_seed, "Seed of --permute-nodes' shuffle")->capture_default_str();
+    study->add_option("--plot", st->plot_path, "Write a PNG: predicted (eq. 7) against measured SIMD ns/ray, a panel per scene");
+    study->callback([st, size] {
+        distributed::checked([&] {
+            for (const std::string& b : st->builders) check_builder_name(b);  // unknown names fail before any work
+        });
+        st->width = (*size)[0], st->height = (*size)[1];
+        run_study(*st);
+    });
+}
 
 }  // namespace canopy

@@ -5,8 +5,12 @@
 #include "renderer/distributed.h"
 #include "renderer/sample_sum.h"
 #include "renderer/image.h"
+#include "engine/options.h"
+#include "experiments/command.h"
 #include "experiments/plot.h"
+#include "renderer/progress.h"
 
+#include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
 #include <chrono>
@@ -15,6 +19,7 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <memory>
 #include <stdexcept>
 
 namespace canopy {
@@ -189,6 +194,41 @@ void run_tradeoff(const TradeoffOptions& o) {
     const std::vector<double> levels = error_levels(curves);
     print_table(curves, levels);
     write_outputs(curves, levels, o);
+}
+
+void register_tradeoff(CLI::App& canopy) {
+    struct Parsed {
+        TradeoffOptions options;
+        std::vector<std::string> accels;
+        std::vector<int> size{options.width, options.height};
+        int threads = 0;
+    };
+    auto p = std::make_shared<Parsed>();
+    TradeoffOptions& tr = p->options;
+    CLI::App* tradeoff = canopy.add_subcommand("tradeoff", "Time to image against RMSE per builder, against a converged reference");
+    tradeoff->add_option("scene", tr.scene, "Scene: scene.json, .obj, .gltf, .glb or gen:NAME?tris=N&seed=S")->required();
+    tradeoff->add_option("--builder", tr.builders, "Builders: " + builder_names())->delimiter(',')->capture_default_str();
+    tradeoff->add_option("--kernel", tr.kernel, "Kernel: auto (widest), bvh2, bvh4, bvh8")->capture_default_str();
+    tradeoff->add_option("--accel", p->accels, "Also Embree, at the --embree-quality levels")->delimiter(',')
+        ->check(CLI::IsMember({"embree"}));
+    tradeoff->add_option("--embree-quality", tr.embree_qualities, "Embree qualities: low, medium, high")->delimiter(',')
+        ->check(CLI::IsMember({"low", "medium", "high"}));
+    tradeoff->add_option("--seconds", tr.seconds, "Wall time per builder, build included")->check(CLI::Range(0.001, 1e6))->capture_default_str();
+    tradeoff->add_option("--max-frames", tr.max_frames, "Frames per builder at most")->check(CLI::Range(1, 1 << 20))->capture_default_str();
+    tradeoff->add_option("--reference-spp", tr.reference_spp, "Samples of the cached reference")->check(CLI::Range(1, 1 << 20))->capture_default_str();
+    tradeoff->add_option("--size", p->size, "Width and height")->expected(2)->check(CLI::Range(1, 16384))->capture_default_str();
+    tradeoff->add_option("--bounces", tr.bounces, "Maximum bounces")->check(CLI::Range(0, 1024))->capture_default_str();
+    tradeoff->add_flag("--materials", tr.material_albedo, "Use the materials: Kd or baseColorFactor as albedo, Ke or emissiveFactor as light");
+    tradeoff->add_option("-o,--output", tr.output, "Output stem: STEM.json, STEM.csv, STEM.png, cached reference beside")->capture_default_str();
+    tradeoff->add_option("--threads", p->threads, "Threads for every library (0: all)")->check(CLI::Range(0, 4096));
+    tradeoff->callback([p] {
+        TradeoffOptions& o = p->options;
+        o.width = p->size[0], o.height = p->size[1];
+        if (p->accels.empty()) o.embree_qualities.clear();
+        else if (o.embree_qualities.empty()) o.embree_qualities = {"medium"};
+        const auto limit = limit_threads(p->threads);
+        run_tradeoff(o);
+    });
 }
 
 }  // namespace canopy

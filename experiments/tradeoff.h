@@ -1,4 +1,5 @@
 #pragma once
+#include "experiments/command.h"
 #include <string>
 #include <vector>
 
@@ -22,5 +23,8 @@ struct TradeoffOptions {
 // frame, with the RMSE of the running average against the reference after each frame (the RMSE itself is not
 // timed). Prints the time each builder needs to reach a few error levels; writes JSON, CSV and a log-log plot.
 void run_tradeoff(const TradeoffOptions& options);
+
+// `canopy tradeoff`, its options and its run.
+void register_tradeoff(CLI::App& canopy);
 
 }  // namespace canopy

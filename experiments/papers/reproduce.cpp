@@ -2,6 +2,8 @@
 
 #include "renderer/distributed.h"
 
+#include <CLI/CLI.hpp>
+
 #include <array>
 #include <chrono>
 #include <cmath>
@@ -19,7 +21,7 @@ namespace {
 
 struct Paper {
     const char* name;
-    void (*reproduce)(const ReproduceOptions&);
+    std::optional<PaperDocument> (*reproduce)(const ReproduceOptions&);
 };
 
 constexpr Paper kPapers[] = {
@@ -52,13 +54,10 @@ std::string cpu_model() {
     return family.empty() ? name : name + " (family " + family + ", model " + model + ")";
 }
 
-}  // namespace
-
-std::vector<std::string> reproducible_papers() {
-    std::vector<std::string> names;
-    for (const Paper& paper : kPapers) names.emplace_back(paper.name);
-    return names;
-}
+// What each paper's document says about where and when it was measured.
+struct Provenance {
+    std::string command, date, machine, commit;
+};
 
 Provenance provenance(const std::string& command) {
     const std::time_t now = std::time(nullptr);
@@ -72,24 +71,39 @@ Provenance provenance(const std::string& command) {
     return {command, date, machine, commit.empty() ? "unknown (not run in a git checkout)" : commit};
 }
 
+// The document's first sentences: the command, date, machine and commit.
 std::string provenance_text(const Provenance& where) {
     return "Written by `" + where.command + "` on " + where.date + "; machine: " + where.machine + "; commit " +
            where.commit + ". Do not edit: run the command again.";
 }
 
-double json_number(const nlohmann::json& row, const char* key) {
-    return row.contains(key) && row[key].is_number() ? row[key].get<double>() : kNotMeasured;
-}
-
-void write_paper(const std::string& out_dir, const std::string& paper, const std::string& markdown, const nlohmann::json& raw) {
+// `out_dir`/`paper`.md and .json.
+void write_paper(const std::string& out_dir, const std::string& paper, const Provenance& where, bool quick,
+                 const PaperDocument& document) {
+    std::string markdown = "# " + document.title + "\n\n" + provenance_text(where);
+    if (quick) markdown += " " + document.quick_note;
+    markdown += "\n\n" + document.introduction + "\n\n";
+    for (const auto& [heading, body] : document.sections) markdown += "## " + heading + "\n\n" + body;
     std::filesystem::create_directories(out_dir);
     for (const auto& [path, text] : {std::pair{out_dir + "/" + paper + ".md", markdown},
-                                     std::pair{out_dir + "/" + paper + ".json", raw.dump(2) + "\n"}}) {
+                                     std::pair{out_dir + "/" + paper + ".json", document.raw.dump(2) + "\n"}}) {
         std::ofstream out(path);
         out << text;
         if (!out) throw std::runtime_error(path + ": cannot write");
         std::printf("wrote %s\n", path.c_str());
     }
+}
+
+}  // namespace
+
+std::vector<std::string> reproducible_papers() {
+    std::vector<std::string> names;
+    for (const Paper& paper : kPapers) names.emplace_back(paper.name);
+    return names;
+}
+
+std::string shared_scene(const ReproduceOptions& options, const std::string& name) {
+    return name.starts_with("gen:") ? name : options.scenes_dir + "/" + name + "/scene.json";
 }
 
 std::string markdown_table(const std::vector<std::string>& header, const std::vector<std::vector<std::string>>& rows) {
@@ -120,7 +134,25 @@ void run_reproduce(const ReproduceOptions& options) {
         known += std::string(known.empty() ? "" : ", ") + paper.name;
     }
     if (chosen.empty()) throw std::invalid_argument("reproduce: unknown paper '" + options.paper + "' (known: " + known + ", all)");
-    for (const Paper* paper : chosen) paper->reproduce(options);
+    for (const Paper* paper : chosen) {
+        const Provenance where = provenance(options.command);  // when the measurement starts
+        if (const std::optional<PaperDocument> document = paper->reproduce(options))
+            write_paper(options.out_dir, paper->name, where, options.quick, *document);
+    }
+}
+
+void register_reproduce(CLI::App& canopy, const std::string& command_line) {
+    auto rp = std::make_shared<ReproduceOptions>();
+    rp->command = command_line;
+    CLI::App* reproduce = canopy.add_subcommand("reproduce", "A paper's tables measured again, written to docs/papers/PAPER.md beside the paper's figures");
+    std::string papers;
+    for (const std::string& name : reproducible_papers()) papers += name + ", ";
+    reproduce->add_option("paper", rp->paper, "Paper: " + papers + "or all")->required();
+    reproduce->add_flag("--quick", rp->quick, "Smaller scenes and images, one build and one frame: minutes");
+    reproduce->add_option("--out", rp->out_dir, "Folder of PAPER.md and PAPER.json")->capture_default_str();
+    reproduce->add_option("--scenes-dir", rp->scenes_dir, "Folder of the shared scenes")->capture_default_str();
+    reproduce->add_option("--scenes", rp->scenes, "Your scenes instead of the paper's (no paper figures beside them)")->delimiter(',');
+    reproduce->callback([rp] { run_reproduce(*rp); });
 }
 
 }  // namespace canopy

@@ -36,12 +36,12 @@ constexpr PaperScene kPaper[] = {
     {"Crown", 8.77, 7.83, 7.54, 5.41, 6.41, 6.94, 113, 52, 53, 0.74, 1.6, 257, 236, 209},
 };
 
-std::vector<std::string> scenes_of(const ReproduceOptions& o) {
-    if (!o.scenes.empty()) return o.scenes;
-    const auto shared = [&](const char* name) { return o.scenes_dir + "/" + name + "/scene.json"; };
-    if (o.quick) return {shared("crytek-sponza"), "gen:cylinders?tris=100000"};
-    return {shared("crytek-sponza"), shared("zoo-64"), "gen:cylinders?tris=2000000"};
-}
+// canopy's scenes; the paper's are not public, its figures are listed after canopy's in every table.
+constexpr PaperSubject<void> kSubjects[] = {
+    {"crytek-sponza", "crytek-sponza", "crytek-sponza"},
+    {"zoo-64", "zoo-64", nullptr},
+    {"cylinders", "gen:cylinders?tris=2000000", "gen:cylinders?tris=100000"},
+};
 
 BenchOptions static_options(bool quick) {
     BenchOptions o;
@@ -68,10 +68,10 @@ BenchOptions dynamic_options(bool quick) {
 }
 
 // The bench row of a canopy top level and threshold, or of Embree's flat or two-level tree.
-const nlohmann::json* canopy_row(const nlohmann::json& scene, const std::string& builder, float threshold = kPaperThreshold) {
-    for (const nlohmann::json& r : scene.at("results")) {
-        if (r.at("accel") != "canopy" || r.at("builder") != builder) continue;
-        if (!r.at("rebraid_threshold").is_null() && std::abs(r.at("rebraid_threshold").get<double>() - threshold) > 1e-6) continue;
+const BenchRow* canopy_row(const BenchScene& scene, const std::string& builder, float threshold = kPaperThreshold) {
+    for (const BenchRow& r : scene.rows) {
+        if (r.accel != "canopy" || r.builder != builder) continue;
+        if (r.rebraid_threshold && std::abs(*r.rebraid_threshold - threshold) > 1e-6) continue;
         return &r;
     }
     return nullptr;
@@ -83,7 +83,7 @@ std::string rebraid_name(float threshold) {
     return threshold == kPaperThreshold ? "rebraid/binned" : text;
 }
 
-double get(const nlohmann::json* row, const char* key) { return row ? json_number(*row, key) : kNotMeasured; }
+double get(const BenchRow* row, double BenchRow::*figure) { return row ? row->*figure : kNotMeasured; }
 
 // Figures of one scene, from its static bench.
 struct Measured {
@@ -95,24 +95,24 @@ struct Measured {
     double closure() const { return (frame[0] - frame[1]) / (frame[0] - frame[2]); }
 };
 
-Measured measured(const nlohmann::json& scene) {
-    Measured m{scene.at("scene").get<std::string>(), {}, {}, {}, {}, kNotMeasured, kNotMeasured, {}, {}, {}};
-    const nlohmann::json* rows[3] = {canopy_row(scene, "two-level/binned"), canopy_row(scene, "rebraid/binned"),
+Measured measured(const BenchScene& scene) {
+    Measured m{scene.scene, {}, {}, {}, {}, kNotMeasured, kNotMeasured, {}, {}, {}};
+    const BenchRow* rows[3] = {canopy_row(scene, "two-level/binned"), canopy_row(scene, "rebraid/binned"),
                                      canopy_row(scene, "binned")};
     for (int k = 0; k < 3; ++k) {
-        m.sah[k] = get(rows[k], "layout_sah"), m.frame[k] = get(rows[k], "frame_ms_mean");
-        m.build[k] = get(rows[k], "build_ms_min"), m.top[k] = get(rows[k], "top_level_ms");
+        m.sah[k] = get(rows[k], &BenchRow::layout_sah), m.frame[k] = get(rows[k], &BenchRow::frame_ms_mean);
+        m.build[k] = get(rows[k], &BenchRow::build_ms_min), m.top[k] = get(rows[k], &BenchRow::top_level_ms);
     }
-    for (const nlohmann::json& r : scene.at("results")) {
-        if (r.at("accel") != "embree") continue;
+    for (const BenchRow& r : scene.rows) {
+        if (r.accel != "embree") continue;
         // Embree's rows come flat first, then its two-level tree (bench.cpp make_entries).
-        (std::isnan(m.embree_flat_frame) ? m.embree_flat_frame : m.embree_two_level_frame) = json_number(r, "frame_ms_mean");
+        (std::isnan(m.embree_flat_frame) ? m.embree_flat_frame : m.embree_two_level_frame) = r.frame_ms_mean;
     }
     for (const float t : kThresholds) {
-        const nlohmann::json* r = canopy_row(scene, "rebraid/binned", t);
+        const BenchRow* r = canopy_row(scene, "rebraid/binned", t);
         if (!r) r = canopy_row(scene, rebraid_name(t), t);
-        m.sweep_frame.push_back(get(r, "frame_ms_mean")), m.sweep_top.push_back(get(r, "top_level_ms"));
-        m.sweep_brefs.push_back(get(r, "brefs"));
+        m.sweep_frame.push_back(get(r, &BenchRow::frame_ms_mean)), m.sweep_top.push_back(get(r, &BenchRow::top_level_ms));
+        m.sweep_brefs.push_back(get(r, &BenchRow::brefs));
     }
     return m;
 }
@@ -165,18 +165,18 @@ std::string figure4(const std::vector<Measured>& ms) {
     return markdown_table(header, rows);
 }
 
-std::string table3(const std::vector<nlohmann::json>& dynamic) {
+std::string table3(const std::vector<BenchScene>& dynamic) {
     std::vector<std::vector<std::string>> rows;
-    for (const nlohmann::json& scene : dynamic) {
-        const nlohmann::json* two_level = nullptr;
-        for (const nlohmann::json& r : scene.at("results"))
-            if (r.at("builder") == "two-level/binned") two_level = &r;
-        for (const nlohmann::json& r : scene.at("results")) {
-            const std::string builder = r.at("builder");
+    for (const BenchScene& scene : dynamic) {
+        const BenchRow* two_level = nullptr;
+        for (const BenchRow& r : scene.rows)
+            if (r.builder == "two-level/binned") two_level = &r;
+        for (const BenchRow& r : scene.rows) {
+            const std::string& builder = r.builder;
             if (builder != "binned" && builder != "lbvh" && builder != "two-level/binned" && builder != "rebraid/binned") continue;
-            rows.push_back({scene.at("scene").get<std::string>() + ": " + builder, format("%.2f", json_number(r, "rebuild_ms_mean")),
-                            format("%.2f", json_number(r, "render_ms_mean")), format("%.2f", json_number(r, "total_ms_mean")),
-                            two_level ? format("%.2fx", json_number(r, "total_ms_mean") / json_number(*two_level, "total_ms_mean")) : "-"});
+            rows.push_back({scene.scene + ": " + builder, format("%.2f", r.rebuild_ms_mean), format("%.2f", r.frame_ms_mean),
+                            format("%.2f", r.total_ms_mean),
+                            two_level ? format("%.2fx", r.total_ms_mean / two_level->total_ms_mean) : "-"});
         }
     }
     rows.push_back({"paper San Miguel: single (binned)", "256", "13", "269", "8.18x"});
@@ -218,33 +218,36 @@ std::string findings(const std::vector<Measured>& ms) {
 
 }  // namespace
 
-void reproduce_benthin_2017(const ReproduceOptions& o) {
-    const Provenance where = provenance(o.command);
-    const std::vector<std::string> scenes = scenes_of(o);
-    const std::vector<nlohmann::json> statics = measure_bench(scenes, static_options(o.quick));
-    const std::vector<nlohmann::json> dynamic = measure_bench(scenes, dynamic_options(o.quick));
-    if (!distributed::is_root()) return;
+std::optional<PaperDocument> reproduce_benthin_2017(const ReproduceOptions& o) {
+    std::vector<std::string> scenes;
+    for (const Subject<void>& s : subjects<void>(o, kSubjects)) scenes.push_back(s.spec);
+    const std::vector<BenchScene> statics = measure_bench(scenes, static_options(o.quick));
+    const std::vector<BenchScene> dynamic = measure_bench(scenes, dynamic_options(o.quick));
+    if (!distributed::is_root()) return std::nullopt;
     std::vector<Measured> ms;
-    for (const nlohmann::json& scene : statics) ms.push_back(measured(scene));
-    std::string md = "# Benthin et al. 2017: two-level BVHs with partial re-braiding\n\n";
-    md += provenance_text(where);
-    if (o.quick) md += " This is a **quick** run: small images, one build and one frame.";
-    md += "\n\nThe paper measured Embree 2.15 on a dual Xeon E5-2699 v3 (36 cores) with scenes that are not public. "
-          "canopy measures its own top levels over binned SAH object trees (one object per OBJ group, bench "
-          "protocol: BENCHMARK.md's diffuse paths, all threads) with Embree MEDIUM's flat and two-level BVHs in the "
-          "same run. \"single\" is canopy's flat BVH over all triangles, \"ours\" its re-braided top level at the "
-          "paper's 10% opening threshold. SAH is the traversal layout's (wide nodes). The paper's scenes follow "
-          "canopy's in every table.\n\n";
-    md += "## Table 1: SAH and frame rate\n\n" + table1(ms) + "\n";
-    md += "## Table 2: build and time to image (ms)\n\nTime to image: the build plus one frame.\n\n" + table2(ms) + "\n";
-    md += "## Figure 4: the opening threshold\n\nPerformance is the 10% row's frame time over the row's (above 1: "
-          "faster than 10%). The paper's figure shows its scenes within about 10% of the default's performance "
-          "except at the extremes.\n\n" + figure4(ms) + "\n";
-    md += "## Table 3: a dynamic object in a static scene\n\nThe object `bench --dynamic auto` chooses turns every "
-          "frame; each frame's rebuild and a primary-ray frame are timed.\n\n" + table3(dynamic) + "\n";
-    md += "## What holds, what does not\n\n" + findings(ms);
-    nlohmann::json raw{{"static", statics}, {"dynamic", dynamic}};
-    write_paper(o.out_dir, "benthin-2017", md, raw);
+    for (const BenchScene& scene : statics) ms.push_back(measured(scene));
+    PaperDocument d{"Benthin et al. 2017: two-level BVHs with partial re-braiding",
+                    "This is a **quick** run: small images, one build and one frame.",
+                    "The paper measured Embree 2.15 on a dual Xeon E5-2699 v3 (36 cores) with scenes that are not public. "
+                    "canopy measures its own top levels over binned SAH object trees (one object per OBJ group, bench "
+                    "protocol: BENCHMARK.md's diffuse paths, all threads) with Embree MEDIUM's flat and two-level BVHs in the "
+                    "same run. \"single\" is canopy's flat BVH over all triangles, \"ours\" its re-braided top level at the "
+                    "paper's 10% opening threshold. SAH is the traversal layout's (wide nodes). The paper's scenes follow "
+                    "canopy's in every table.",
+                    {}, {}};
+    d.sections = {
+        {"Table 1: SAH and frame rate", table1(ms) + "\n"},
+        {"Table 2: build and time to image (ms)", "Time to image: the build plus one frame.\n\n" + table2(ms) + "\n"},
+        {"Figure 4: the opening threshold",
+         "Performance is the 10% row's frame time over the row's (above 1: faster than 10%). The paper's figure shows "
+         "its scenes within about 10% of the default's performance except at the extremes.\n\n" + figure4(ms) + "\n"},
+        {"Table 3: a dynamic object in a static scene",
+         "The object `bench --dynamic auto` chooses turns every frame; each frame's rebuild and a primary-ray frame "
+         "are timed.\n\n" + table3(dynamic) + "\n"},
+        {"What holds, what does not", findings(ms)},
+    };
+    d.raw = {{"static", bench_json(statics)}, {"dynamic", bench_json(dynamic)}};
+    return d;
 }
 
 }  // namespace canopy

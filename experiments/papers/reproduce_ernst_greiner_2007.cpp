@@ -58,33 +58,21 @@ constexpr PaperScene kPowerPlant{"Power plant (part)", 1667578,
                                   {"bvh SA_max=(illegible)", 4.88, 123.0, 127, 3.12, 5.39, 3.34, true},
                                   {"kd-tree", 10.01, 176.7, 96.8, 1.56, 4.20, 4.28}}};
 
-// A scene of the reproduction: canopy's scene for one of the paper's, or a user's scene with no paper row.
-struct Subject {
-    std::string label, spec;
-    const PaperScene* paper = nullptr;
+constexpr PaperSubject<PaperScene> kSubjects[] = {
+    {"Bunny: stanford-bunny", "stanford-bunny", "stanford-bunny", &kBunny},
+    {"Mirror low: gen:mirror, 85,651 triangles", "gen:mirror?tris=85651", "gen:mirror?tris=21413", &kMirrorLow,
+     "Mirror low: gen:mirror, 21,413 triangles (quick)"},
+    {"Mirror high: gen:mirror, 334,080 triangles", "gen:mirror?tris=334080", "gen:mirror?tris=83520", &kMirrorHigh,
+     "Mirror high: gen:mirror, 83,520 triangles (quick)"},
+    {"Power plant: gen:cylinders, 1,667,578 triangles", "gen:cylinders?tris=1667578", "gen:cylinders?tris=200000",
+     &kPowerPlant, "Power plant: gen:cylinders, 200,000 triangles (quick)"},
 };
 
-std::vector<Subject> subjects(const ReproduceOptions& o) {
-    std::vector<Subject> list;
-    if (!o.scenes.empty()) {
-        for (const std::string& spec : o.scenes) list.push_back({spec, spec, nullptr});
-        return list;
-    }
-    const std::string bunny = o.scenes_dir + "/stanford-bunny/scene.json";
-    if (o.quick)
-        return {{"Bunny: stanford-bunny", bunny, &kBunny},
-                {"Mirror low: gen:mirror, 21,413 triangles (quick)", "gen:mirror?tris=21413", &kMirrorLow},
-                {"Mirror high: gen:mirror, 83,520 triangles (quick)", "gen:mirror?tris=83520", &kMirrorHigh},
-                {"Power plant: gen:cylinders, 200,000 triangles (quick)", "gen:cylinders?tris=200000", &kPowerPlant}};
-    return {{"Bunny: stanford-bunny", bunny, &kBunny},
-            {"Mirror low: gen:mirror, 85,651 triangles", "gen:mirror?tris=85651", &kMirrorLow},
-            {"Mirror high: gen:mirror, 334,080 triangles", "gen:mirror?tris=334080", &kMirrorHigh},
-            {"Power plant: gen:cylinders, 1,667,578 triangles", "gen:cylinders?tris=1667578", &kPowerPlant}};
-}
+using StandIn = Subject<PaperScene>;
 
 // The references per triangle the paper's two ESC rows stand for (their memory; a user's scene: the paper's
 // typical 1.5 and 3.5), within the reference cap of the esc builder.
-std::vector<double> growth_targets(const Subject& s) {
+std::vector<double> growth_targets(const StandIn& s) {
     std::vector<double> targets = s.paper ? std::vector<double>{s.paper->rows[1].memory, s.paper->rows[2].memory}
                                           : std::vector<double>{1.5, 3.5};
     for (double& t : targets) t = std::min(t, kMaxEscReferencesPerTriangle);
@@ -156,29 +144,28 @@ struct Measured {
     bool kd = false, embree = false;
 };
 
-std::vector<Measured> measured_rows(const nlohmann::json& scene) {
+std::vector<Measured> measured_rows(const BenchScene& scene) {
     std::vector<Measured> rows;
-    for (const nlohmann::json& r : scene.at("results")) {
-        const bool embree = r.at("accel") == "embree";
-        const std::string builder = embree ? "Embree " + r.at("quality").get<std::string>() : r.at("builder").get<std::string>();
-        const std::string sa_max = r.at("esc_sa_max").is_string() ? r.at("esc_sa_max").get<std::string>() : "";
+    for (const BenchRow& r : scene.rows) {
+        const bool embree = r.accel == "embree";
+        const std::string builder = embree ? "Embree " + r.quality : r.builder;
+        const std::string sa_max = r.esc_sa_max.value_or("");
         std::string label = builder == "binned" ? "bvh (binned SAH)" : builder == "kdtree" ? "kd-tree" : builder;
         if (!sa_max.empty()) label = sa_max == "auto" ? "bvh ESC, automatic SA_max" : "bvh ESC, SA_max " + sa_max;
-        rows.push_back({label, sa_max, embree ? kNotMeasured : json_number(r, "refs_per_tri"), json_number(r, "bytes"),
-                        json_number(r, "build_ms_min") / 1e3, json_number(r, "inner_per_ray"), json_number(r, "triangles_per_ray"),
-                        json_number(r, "frame_ms_mean") / 1e3, builder == "kdtree", embree});
+        rows.push_back({label, sa_max, embree ? kNotMeasured : r.refs_per_tri, r.bytes, r.build_ms_min / 1e3, r.inner_per_ray,
+                        r.triangles_per_ray, r.frame_ms_mean / 1e3, builder == "kdtree", embree});
     }
     return rows;
 }
 
 // The paper's row that a measured row reproduces: the plain BVH, the two matched SA_max rows, the kd-tree.
-const PaperRow* paper_row_of(const Subject& s, size_t index, const Measured& m) {
+const PaperRow* paper_row_of(const StandIn& s, size_t index, const Measured& m) {
     if (!s.paper || m.embree) return nullptr;
     if (m.kd) return &s.paper->rows[3];
     return index < 3 ? &s.paper->rows[index] : nullptr;
 }
 
-std::string scene_table(const Subject& s, const std::vector<Measured>& rows, bool today) {
+std::string scene_table(const StandIn& s, const std::vector<Measured>& rows, bool today) {
     const Measured& plain = rows.front();
     const Measured* embree = nullptr;
     for (const Measured& m : rows)
@@ -236,11 +223,11 @@ const Measured& best_matched_esc(const std::vector<Measured>& rows) {
 }
 
 // "What holds, what does not": sentences computed from the numbers.
-std::string findings(const std::vector<Subject>& subjects, const std::vector<SettingResult>& results) {
+std::string findings(const std::vector<StandIn>& subjects, const std::vector<SettingResult>& results) {
     std::string text;
-    const bool papered = std::all_of(subjects.begin(), subjects.end(), [](const Subject& s) { return s.paper; });
+    const bool papered = std::all_of(subjects.begin(), subjects.end(), [](const StandIn& s) { return s.paper; });
     std::vector<std::string> paper_kd;
-    for (const Subject& s : subjects)
+    for (const StandIn& s : subjects)
         if (s.paper && s.paper->rows[3].ray_s < std::min({s.paper->rows[0].ray_s, s.paper->rows[1].ray_s, s.paper->rows[2].ray_s}))
             paper_kd.push_back(s.paper->name);
     for (const SettingResult& r : results) {
@@ -290,7 +277,7 @@ std::string findings(const std::vector<Subject>& subjects, const std::vector<Set
 
 // What changed since 2007, from the two settings' numbers: how much of the kd-tree's lead over the plain BVH
 // survives wide SIMD nodes and incoherent rays, and where splitting still pays.
-std::string changes(const std::vector<Subject>& subjects, const std::vector<SettingResult>& results) {
+std::string changes(const std::vector<StandIn>& subjects, const std::vector<SettingResult>& results) {
     if (results.size() < 2) return "";
     std::vector<std::string> kd_lead, visits, pays, does_not;
     for (size_t i = 0; i < subjects.size(); ++i) {
@@ -318,64 +305,71 @@ std::string changes(const std::vector<Subject>& subjects, const std::vector<Sett
            ", and not on " + list_text(does_not) + ".\n";
 }
 
-std::string document(const ReproduceOptions& o, const Provenance& where, const std::vector<Subject>& subjects,
-                     const std::vector<std::vector<std::string>>& sa_max, const std::vector<SettingResult>& results) {
-    std::string md = "# Ernst and Greiner 2007, Table 1: early split clipping against a plain BVH and a kd-tree\n\n";
-    md += provenance_text(where);
-    if (o.quick) md += " This is a **quick** run: smaller stand-in scenes, smaller images, one build and one frame.";
-    md += "\n\nThe paper (../shared/papers/ernst-greiner-2007-early-split-clipping.txt, sec. 6) measured on one core of "
-          "a 2.16 GHz Core 2 Duo: scalar single rays, one primary ray per pixel at 1000 x 1000. Its scenes are not "
-          "public: canopy's stand-ins are stanford-bunny (the same model), `gen:mirror` (a faceted CAD reflector "
-          "tessellated coarsely and finely, long slivers) and `gen:cylinders` (a Power-Plant-like tangle of thin "
-          "pipes). Its SA_max values are areas in its scenes' units; canopy picks per scene the SA_max that grows the "
-          "references as much as the paper's memory grew (in multiples of the median ideal triangle area, "
-          "`--esc-sa-max`), at most 4 per triangle (the esc builder's cap), and adds its automatic SA_max.\n\n"
-          "Columns: references per triangle; memory relative to the plain BVH (nodes and leaves, the layout the row "
-          "traces); build time (fastest build); inner nodes and triangles visited per ray (counting kernel over the "
-          "first timed frame); the frame's time (the paper's T_ray); speed-up over the plain BVH. \"paper\" columns "
-          "are Table 1's values for the matching row; `*` marks a speed-up computed from its T_ray column where the "
-          "OCR copy lost the printed digits.\n\n";
-    for (size_t k = 0; k < results.size(); ++k) {
-        const SettingResult& r = results[k];
-        md += "## " + std::string(r.setting->title) + "\n\n" + r.setting->what + ".\n\n";
+PaperDocument document(const std::vector<StandIn>& subjects, const std::vector<std::vector<std::string>>& sa_max,
+                       const std::vector<SettingResult>& results) {
+    PaperDocument d{"Ernst and Greiner 2007, Table 1: early split clipping against a plain BVH and a kd-tree",
+                    "This is a **quick** run: smaller stand-in scenes, smaller images, one build and one frame.",
+                    "The paper (../shared/papers/ernst-greiner-2007-early-split-clipping.txt, sec. 6) measured on one core of "
+                    "a 2.16 GHz Core 2 Duo: scalar single rays, one primary ray per pixel at 1000 x 1000. Its scenes are not "
+                    "public: canopy's stand-ins are stanford-bunny (the same model), `gen:mirror` (a faceted CAD reflector "
+                    "tessellated coarsely and finely, long slivers) and `gen:cylinders` (a Power-Plant-like tangle of thin "
+                    "pipes). Its SA_max values are areas in its scenes' units; canopy picks per scene the SA_max that grows the "
+                    "references as much as the paper's memory grew (in multiples of the median ideal triangle area, "
+                    "`--esc-sa-max`), at most 4 per triangle (the esc builder's cap), and adds its automatic SA_max.\n\n"
+                    "Columns: references per triangle; memory relative to the plain BVH (nodes and leaves, the layout the row "
+                    "traces); build time (fastest build); inner nodes and triangles visited per ray (counting kernel over the "
+                    "first timed frame); the frame's time (the paper's T_ray); speed-up over the plain BVH. \"paper\" columns "
+                    "are Table 1's values for the matching row; `*` marks a speed-up computed from its T_ray column where the "
+                    "OCR copy lost the printed digits.",
+                    {}, {}};
+    for (const SettingResult& r : results) {
+        std::string body = std::string(r.setting->what) + ".\n\n";
         for (size_t i = 0; i < subjects.size(); ++i) {
-            md += "### " + subjects[i].label + "\n\n";
-            md += "SA_max of the matched rows: " + list_text(sa_max[i]) + ".\n\n";
-            md += scene_table(subjects[i], r.scenes[i], r.setting->embree) + "\n";
+            body += "### " + subjects[i].label + "\n\n";
+            body += "SA_max of the matched rows: " + list_text(sa_max[i]) + ".\n\n";
+            body += scene_table(subjects[i], r.scenes[i], r.setting->embree) + "\n";
         }
+        d.sections.emplace_back(r.setting->title, body);
     }
-    md += "## What holds, what does not\n\n" + findings(subjects, results);
-    md += "## What changed since 2007\n\n" + changes(subjects, results);
-    return md;
+    d.sections.emplace_back("What holds, what does not", findings(subjects, results));
+    d.sections.emplace_back("What changed since 2007", changes(subjects, results));
+    return d;
 }
 
-}  // namespace
-
-void reproduce_ernst_greiner_2007(const ReproduceOptions& o) {
-    const Provenance where = provenance(o.command);
-    const std::vector<Subject> list = subjects(o);
-    std::vector<std::vector<std::string>> sa_max;  // per subject, the matched SA_max values
-    for (const Subject& s : list) {
+// Per subject, the SA_max values whose references grow as the paper's memory did.
+std::vector<std::vector<std::string>> matched_sa_max(const std::vector<StandIn>& list) {
+    std::vector<std::vector<std::string>> sa_max;
+    for (const StandIn& s : list) {
         const FlatScene flat = flatten(load_scene(s.spec));
         if (flat.triangles.empty()) throw std::invalid_argument("scene '" + s.spec + "' has no triangles");
         std::vector<std::string> values;
         for (const double target : growth_targets(s)) values.push_back(sa_max_for_growth(flat, target));
         sa_max.push_back(values);
     }
+    return sa_max;
+}
+
+}  // namespace
+
+std::optional<PaperDocument> reproduce_ernst_greiner_2007(const ReproduceOptions& o) {
+    const std::vector<StandIn> list = subjects<PaperScene>(o, kSubjects);
+    const std::vector<std::vector<std::string>> sa_max = matched_sa_max(list);
     std::vector<SettingResult> results;
     nlohmann::json raw = nlohmann::json::object();
     for (const Setting& setting : kSettings) {
         SettingResult result{&setting, {}};
         for (size_t i = 0; i < list.size(); ++i) {
-            const std::vector<nlohmann::json> scene = measure_bench({list[i].spec}, bench_options(setting, sa_max[i], o.quick));
+            const std::vector<BenchScene> scene = measure_bench({list[i].spec}, bench_options(setting, sa_max[i], o.quick));
             if (!distributed::is_root()) continue;
             result.scenes.push_back(measured_rows(scene.at(0)));
-            raw[setting.key].push_back(scene.at(0));
+            raw[setting.key].push_back(scene.at(0).json);
         }
         results.push_back(std::move(result));
     }
-    if (!distributed::is_root()) return;
-    write_paper(o.out_dir, "ernst-greiner-2007", document(o, where, list, sa_max, results), raw);
+    if (!distributed::is_root()) return std::nullopt;
+    PaperDocument d = document(list, sa_max, results);
+    d.raw = std::move(raw);
+    return d;
 }
 
 }  // namespace canopy

@@ -16,11 +16,7 @@ namespace canopy {
 namespace {
 
 // Table 1's builders in its order, and canopy's builder for each.
-struct Builder {
-    const char* paper;
-    const char* canopy;
-};
-constexpr Builder kBuilders[] = {{"SWEEPSAH", "sweep"},        {"BONSAI", "bonsai"},        {"BINNEDSAH", "binned"},
+constexpr PaperBuilder kBuilders[] = {{"SWEEPSAH", "sweep"},        {"BONSAI", "bonsai"},        {"BINNEDSAH", "binned"},
                                  {"SWEEPPRE", "sweep-presplit"}, {"BONSAIS", "bonsai-split"}, {"BINNEDPRE", "presplit"},
                                  {"BINNEDS", "sbvh"}};
 constexpr size_t kCount = std::size(kBuilders);
@@ -50,21 +46,11 @@ constexpr PaperScene kPowerPlant{"Power Plant (12,759,246 triangles)",
                                  {19, 47, 50}, 844, 45,
                                  {10.02, 9.83, 10.67, 8.34, 8.17, 9.37, 7.32}};
 
-struct Subject {
-    std::string spec;
-    const PaperScene* paper = nullptr;
+constexpr PaperSubject<PaperScene> kSubjects[] = {
+    {"Sibenik", "sibenik", "sibenik", &kSibenik},
+    {"Sponza", "crytek-sponza", nullptr, &kSponza},
+    {"Power Plant", "gen:cylinders?tris=2000000", "gen:cylinders?tris=100000", &kPowerPlant},
 };
-
-std::vector<Subject> subjects(const ReproduceOptions& o) {
-    std::vector<Subject> list;
-    if (!o.scenes.empty()) {
-        for (const std::string& spec : o.scenes) list.push_back({spec});
-        return list;
-    }
-    const auto shared = [&](const char* name) { return o.scenes_dir + "/" + name + "/scene.json"; };
-    if (o.quick) return {{shared("sibenik"), &kSibenik}, {"gen:cylinders?tris=100000", &kPowerPlant}};
-    return {{shared("sibenik"), &kSibenik}, {shared("crytek-sponza"), &kSponza}, {"gen:cylinders?tris=2000000", &kPowerPlant}};
-}
 
 // 1, 2, 4, ... and every hardware thread: Figure 4's thread counts on this machine.
 std::vector<int> thread_counts() {
@@ -77,7 +63,7 @@ std::vector<int> thread_counts() {
 
 BenchOptions table_options(bool quick) {
     BenchOptions o;
-    for (const Builder& b : kBuilders) o.builders.push_back(b.canopy);
+    for (const PaperBuilder& b : kBuilders) o.builders.push_back(b.canopy);
     o.embree_qualities = {"medium", "high"};
     o.sbvh_alpha = kPapersSbvhAlpha;  // BINNEDS: SBVH as Stich et al. set it
     o.epo = false;
@@ -97,73 +83,71 @@ BenchOptions scaling_options(bool quick) {
     return o;
 }
 
-const nlohmann::json* row_of(const nlohmann::json& scene, const std::string& builder, int threads = -1) {
-    for (const nlohmann::json& r : scene.at("results")) {
-        const std::string name = r.at("accel") == "embree" ? "embree " + r.at("quality").get<std::string>() : r.at("builder").get<std::string>();
-        if (name == builder && (threads < 0 || r.at("threads") == threads)) return &r;
-    }
+const BenchRow* row_of(const BenchScene& scene, const std::string& builder, int threads = -1) {
+    for (const BenchRow& r : scene.rows)
+        if (r.name() == builder && (threads < 0 || r.threads == threads)) return &r;
     return nullptr;
 }
 
-double get(const nlohmann::json* row, const char* key) { return row ? json_number(*row, key) : kNotMeasured; }
+double get(const BenchRow* row, double BenchRow::*figure) { return row ? row->*figure : kNotMeasured; }
 
 std::string percent_of(double v, double base) {
     return std::isnan(v) ? "-" : format("%.0f", v) + (std::isnan(base) ? "" : format(" [%.0f%%]", 100.0 * v / base));
 }
 
-std::string table1(const nlohmann::json& scene, const PaperScene* p) {
-    const double sweep_frame = get(row_of(scene, "sweep"), "frame_ms_mean");
+std::string table1(const BenchScene& scene, const PaperScene* p) {
+    const double sweep_frame = get(row_of(scene, "sweep"), &BenchRow::frame_ms_mean);
     std::vector<std::vector<std::string>> rows;
     for (size_t i = 0; i < kCount; ++i) {
-        const nlohmann::json* r = row_of(scene, kBuilders[i].canopy);
-        rows.push_back({std::string(kBuilders[i].paper) + " (" + kBuilders[i].canopy + ")", format("%.1f", get(r, "build_ms_min")),
-                        p ? percent_of(p->build_ms[i], kNotMeasured) : "-", percent_of(get(r, "frame_ms_mean"), sweep_frame),
+        const BenchRow* r = row_of(scene, kBuilders[i].canopy);
+        rows.push_back({kBuilders[i].label(), format("%.1f", get(r, &BenchRow::build_ms_min)),
+                        p ? percent_of(p->build_ms[i], kNotMeasured) : "-", percent_of(get(r, &BenchRow::frame_ms_mean), sweep_frame),
                         p ? percent_of(p->frame_ms[i], p->frame_ms[0]) : "-"});
     }
     for (const char* embree : {"embree medium", "embree high"}) {
-        const nlohmann::json* r = row_of(scene, embree);
-        rows.push_back({std::string("Embree ") + (embree + 7), format("%.1f", get(r, "build_ms_min")), "-",
-                        percent_of(get(r, "frame_ms_mean"), sweep_frame), "-"});
+        const BenchRow* r = row_of(scene, embree);
+        rows.push_back({std::string("Embree ") + (embree + 7), format("%.1f", get(r, &BenchRow::build_ms_min)), "-",
+                        percent_of(get(r, &BenchRow::frame_ms_mean), sweep_frame), "-"});
     }
     return markdown_table({"builder", "build ms", "paper", "frame ms [of SWEEPSAH]", "paper"}, rows);
 }
 
-std::string splitting_table(const nlohmann::json& scene, const PaperScene* p) {
+std::string splitting_table(const BenchScene& scene, const PaperScene* p) {
     std::vector<std::vector<std::string>> rows;
     const char* splitters[] = {"bonsai-split", "presplit", "sbvh"};
     const char* names[] = {"BONSAIS (bonsai-split)", "BINNEDPRE (presplit)", "BINNEDS (sbvh)"};
     for (int k = 0; k < 3; ++k) {
-        const nlohmann::json* r = row_of(scene, splitters[k]);
-        const double split_ms = get(r, "split_ms");
-        rows.push_back({names[k], format("%+.0f%%", 100.0 * (get(r, "refs_per_tri") - 1.0)),
+        const BenchRow* r = row_of(scene, splitters[k]);
+        const double split_ms = get(r, &BenchRow::split_ms);
+        rows.push_back({names[k], format("%+.0f%%", 100.0 * (get(r, &BenchRow::refs_per_tri) - 1.0)),
                         p ? format("+%.0f%%", p->split_percent[k]) : "-",
-                        k == 0 ? format("%.1f", split_ms) + format(" [%.0f%%]", 100.0 * split_ms / get(r, "build_ms_min")) : "-",
+                        k == 0 ? format("%.1f", split_ms) + format(" [%.0f%%]", 100.0 * split_ms / get(r, &BenchRow::build_ms_min)) : "-",
                         k == 0 && p ? format("%.0f", p->split_ms) + format(" [%.0f%%]", p->split_share) : "-"});
     }
     return markdown_table({"builder", "references added (Table 3)", "paper", "split pass ms [of the build] (Table 4)", "paper"}, rows);
 }
 
-std::string sah_table(const nlohmann::json& scene, const PaperScene* p) {
-    const double sweep = get(row_of(scene, "sweep"), "sah");
+std::string sah_table(const BenchScene& scene, const PaperScene* p) {
+    const double sweep = get(row_of(scene, "sweep"), &BenchRow::sah);
     std::vector<std::vector<std::string>> rows;
     for (size_t i = 0; i < kCount; ++i) {
-        const double sah = get(row_of(scene, kBuilders[i].canopy), "sah");
-        rows.push_back({std::string(kBuilders[i].paper) + " (" + kBuilders[i].canopy + ")", format("%.2f", sah) + format(" (%.3f)", sah / sweep),
+        const double sah = get(row_of(scene, kBuilders[i].canopy), &BenchRow::sah);
+        rows.push_back({kBuilders[i].label(), format("%.2f", sah) + format(" (%.3f)", sah / sweep),
                         p ? format("%.2f", p->sah[i]) + format(" (%.3f)", p->sah[i] / p->sah[0]) : "-"});
     }
     return markdown_table({"builder", "SAH (of SWEEPSAH's)", "paper"}, rows);
 }
 
-std::string figure4(const nlohmann::json& scene) {
+std::string figure4(const BenchScene& scene) {
     const std::vector<int> counts = thread_counts();
     std::vector<std::string> header{"builder"};
     for (int t : counts) header.push_back(std::to_string(t) + (t == 1 ? " thread" : " threads"));
     std::vector<std::vector<std::string>> rows;
     for (const char* builder : {"binned", "bonsai", "bonsai-split", "sweep", "sbvh", "embree medium", "embree high"}) {
-        const double one = get(row_of(scene, builder, counts.front()), "build_ms_min");
+        const double one = get(row_of(scene, builder, counts.front()), &BenchRow::build_ms_min);
         std::vector<std::string> row{builder};
         for (int t : counts) {
-            const double ms = get(row_of(scene, builder, t), "build_ms_min");
+            const double ms = get(row_of(scene, builder, t), &BenchRow::build_ms_min);
             row.push_back(format("%.1f ms", ms) + format(" (%.2fx)", one / ms));
         }
         rows.push_back(row);
@@ -171,20 +155,20 @@ std::string figure4(const nlohmann::json& scene) {
     return markdown_table(header, rows);
 }
 
-std::string findings(const std::vector<Subject>& list, const std::vector<nlohmann::json>& tables) {
+std::string findings(const std::vector<Subject<PaperScene>>& list, const std::vector<BenchScene>& tables) {
     std::string gains, fastest;
     for (size_t i = 0; i < list.size(); ++i) {
-        const nlohmann::json& scene = tables[i];
-        const double bonsai = get(row_of(scene, "bonsai"), "frame_ms_mean"), split = get(row_of(scene, "bonsai-split"), "frame_ms_mean");
-        const double sbvh_build = get(row_of(scene, "sbvh"), "build_ms_min"), split_build = get(row_of(scene, "bonsai-split"), "build_ms_min");
-        const std::string name = scene.at("scene");
+        const BenchScene& scene = tables[i];
+        const double bonsai = get(row_of(scene, "bonsai"), &BenchRow::frame_ms_mean), split = get(row_of(scene, "bonsai-split"), &BenchRow::frame_ms_mean);
+        const double sbvh_build = get(row_of(scene, "sbvh"), &BenchRow::build_ms_min), split_build = get(row_of(scene, "bonsai-split"), &BenchRow::build_ms_min);
+        const std::string& name = scene.scene;
         gains += (gains.empty() ? "" : "; ") + name + ": frames " + format("%.2fx", split / bonsai) + " of BONSAI's";
         if (list[i].paper) gains += format(" (paper %.2fx)", list[i].paper->frame_ms[4] / list[i].paper->frame_ms[1]);
         gains += ", built in " + format("%.2fx", split_build / sbvh_build) + " of BINNEDS's (sbvh) time";
-        const nlohmann::json* best = nullptr;
-        for (const nlohmann::json& r : scene.at("results"))
-            if (r.at("accel") == "canopy" && (!best || json_number(r, "frame_ms_mean") < json_number(*best, "frame_ms_mean"))) best = &r;
-        if (best) fastest += (fastest.empty() ? "" : ", ") + name + " " + best->at("builder").get<std::string>();
+        const BenchRow* best = nullptr;
+        for (const BenchRow& r : scene.rows)
+            if (r.accel == "canopy" && (!best || r.frame_ms_mean < best->frame_ms_mean)) best = &r;
+        if (best) fastest += (fastest.empty() ? "" : ", ") + name + " " + best->builder;
     }
     return "Split partitioning (BONSAIS against BONSAI): " + gains + ". Fastest frames among canopy's builders: " +
            fastest + " (paper: BONSAIS or BINNEDS on every scene where splitting pays).\n";
@@ -192,36 +176,36 @@ std::string findings(const std::vector<Subject>& list, const std::vector<nlohman
 
 }  // namespace
 
-void reproduce_ganestam_doggett_2016(const ReproduceOptions& o) {
-    const Provenance where = provenance(o.command);
-    const std::vector<Subject> list = subjects(o);
+std::optional<PaperDocument> reproduce_ganestam_doggett_2016(const ReproduceOptions& o) {
+    const std::vector<Subject<PaperScene>> list = subjects<PaperScene>(o, kSubjects);
     std::vector<std::string> specs;
-    for (const Subject& s : list) specs.push_back(s.spec);
-    const std::vector<nlohmann::json> tables = measure_bench(specs, table_options(o.quick));
-    const std::vector<nlohmann::json> scaling = measure_bench({specs.back()}, scaling_options(o.quick));
-    if (!distributed::is_root()) return;
-    std::string md = "# Ganestam and Doggett 2016: SAH guided spatial split partitioning\n\n";
-    md += provenance_text(where);
-    if (o.quick) md += " This is a **quick** run: small images, one build and one frame.";
-    md += "\n\nThe paper measured Embree 2.x's 8-wide BVH and path tracer on a quad-core Intel 4850HQ laptop (Figure 4 on "
-          "a dual 12-core E5-2643 v3). canopy measures its own builders for the paper's seven (bench protocol, all "
-          "threads, widest kernel), with Embree MEDIUM and HIGH beside; Power Plant's stand-in is `gen:cylinders`. "
-          "BINNEDPRE is Embree's pre-split builder in the paper and canopy's budgeted pre-splitting (Karras and Aila "
-          "2013, 50% budget) here; BINNEDS is canopy's SBVH. SAH is canopy's cost of the binary tree (its own "
-          "constants): compare ratios. The OCR copy of the paper's Table 1 is illegible for some cells (\"-\").\n\n";
+    for (const Subject<PaperScene>& s : list) specs.push_back(s.spec);
+    const std::vector<BenchScene> tables = measure_bench(specs, table_options(o.quick));
+    const std::vector<BenchScene> scaling = measure_bench({specs.back()}, scaling_options(o.quick));
+    if (!distributed::is_root()) return std::nullopt;
+    PaperDocument d{"Ganestam and Doggett 2016: SAH guided spatial split partitioning",
+                    "This is a **quick** run: small images, one build and one frame.",
+                    "The paper measured Embree 2.x's 8-wide BVH and path tracer on a quad-core Intel 4850HQ laptop (Figure 4 on "
+                    "a dual 12-core E5-2643 v3). canopy measures its own builders for the paper's seven (bench protocol, all "
+                    "threads, widest kernel), with Embree MEDIUM and HIGH beside; Power Plant's stand-in is `gen:cylinders`. "
+                    "BINNEDPRE is Embree's pre-split builder in the paper and canopy's budgeted pre-splitting (Karras and Aila "
+                    "2013, 50% budget) here; BINNEDS is canopy's SBVH. SAH is canopy's cost of the binary tree (its own "
+                    "constants): compare ratios. The OCR copy of the paper's Table 1 is illegible for some cells (\"-\").",
+                    {}, {}};
     for (size_t i = 0; i < list.size(); ++i) {
         const PaperScene* p = list[i].paper;
-        md += "## " + tables[i].at("scene").get<std::string>() + (p ? " (paper: " + std::string(p->name) + ")" : "") + "\n\n";
-        md += "### Table 1: build and frame\n\n" + table1(tables[i], p) + "\n";
-        md += "### Tables 3 and 4: splitting\n\n" + splitting_table(tables[i], p) + "\n";
-        md += "### Table 5: SAH\n\n" + sah_table(tables[i], p) + "\n";
+        d.sections.emplace_back(tables[i].scene + (p ? " (paper: " + std::string(p->name) + ")" : ""),
+                                "### Table 1: build and frame\n\n" + table1(tables[i], p) + "\n" +
+                                "### Tables 3 and 4: splitting\n\n" + splitting_table(tables[i], p) + "\n" +
+                                "### Table 5: SAH\n\n" + sah_table(tables[i], p) + "\n");
     }
-    md += "## Figure 4: build time against threads, " + scaling.at(0).at("scene").get<std::string>() + "\n\nSpeed-up "
-          "over one thread in brackets. The paper (Power Plant, 1 to 24 threads): BINNEDSAH scales slightly better "
-          "than BONSAIS, whose build stays close to BINNEDSAH's.\n\n" + figure4(scaling.at(0)) + "\n";
-    md += "## What holds, what does not\n\n" + findings(list, tables);
-    nlohmann::json raw{{"tables", tables}, {"scaling", scaling}};
-    write_paper(o.out_dir, "ganestam-doggett-2016", md, raw);
+    d.sections.emplace_back("Figure 4: build time against threads, " + scaling.at(0).scene,
+                            "Speed-up over one thread in brackets. The paper (Power Plant, 1 to 24 threads): BINNEDSAH "
+                            "scales slightly better than BONSAIS, whose build stays close to BINNEDSAH's.\n\n" +
+                            figure4(scaling.at(0)) + "\n");
+    d.sections.emplace_back("What holds, what does not", findings(list, tables));
+    d.raw = {{"tables", bench_json(tables)}, {"scaling", bench_json(scaling)}};
+    return d;
 }
 
 }  // namespace canopy
