@@ -208,6 +208,33 @@ TEST_CASE("the re-braided top level is the same with 1 and 2 threads", "[two-lev
     CHECK(std::memcmp(one.pool.leaves.data(), two.pool.leaves.data(), one.pool.leaves.size() * sizeof(one.pool.leaves[0])) == 0);
 }
 
+TEST_CASE("both top levels over hundreds of placements are the same with 1 and 2 threads", "[two-level]") {
+    // Enough BRefs that the top level's subtrees build as parallel tasks, the plain top level's included.
+    Scene scene = load_scene("gen:surface?tris=800&seed=9");
+    for (int i = 0; i < 300; ++i) {
+        const glm::mat4 moved = glm::translate(glm::mat4(1.0f), Vec3(0.7f * float(i % 17), 0.3f * float(i % 5), 0.9f * float(i / 17)));
+        scene.instances.push_back({0, glm::rotate(moved, 0.37f * float(i), glm::normalize(Vec3(1, 2 + i % 3, 3)))});
+    }
+    const TwoLevelInput input = two_level_input(scene);
+    for (const TopLevel top : {TopLevel::TwoLevel, TopLevel::Rebraid}) {
+        TwoLevelSettings settings;
+        settings.top = top;
+        auto build = [&](int threads) {
+            tbb::global_control limit(tbb::global_control::max_allowed_parallelism, size_t(threads));
+            return build_two_level<4>(input, settings);
+        };
+        const TwoLevelBvh<4> one = build(1), two = build(2);
+        INFO((top == TopLevel::Rebraid ? "rebraid" : "two-level"));
+        REQUIRE(one.pool.nodes.size() == two.pool.nodes.size());
+        REQUIRE(one.entries.size() == two.entries.size());
+        REQUIRE(one.pool.leaves.size() == two.pool.leaves.size());
+        CHECK(one.pool.nodes.size() - one.object_nodes > 64 / 4);  // a top level of many nodes, not one leaf
+        CHECK(std::memcmp(one.pool.nodes.data(), two.pool.nodes.data(), one.pool.nodes.size() * sizeof(WideNode<4>)) == 0);
+        CHECK(std::memcmp(one.entries.data(), two.entries.data(), one.entries.size() * sizeof(TopLevelRef)) == 0);
+        CHECK(std::memcmp(one.pool.leaves.data(), two.pool.leaves.data(), one.pool.leaves.size() * sizeof(one.pool.leaves[0])) == 0);
+    }
+}
+
 TEST_CASE("re-braiding lowers the SAH of the plain two-level top level", "[two-level]") {
     const TwoLevelInput input = two_level_input(instanced_scene());
     TwoLevelSettings plain;
