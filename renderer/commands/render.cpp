@@ -6,6 +6,9 @@
 #include "renderer/commands/heatmap.h"
 #include "renderer/distributed.h"
 #include "renderer/sample_sum.h"
+#include "renderer/wavefront.h"
+
+#include <tbb/info.h>
 
 #include <unistd.h>
 
@@ -57,11 +60,23 @@ void check_blas_builder(const std::string& blas, const std::vector<std::string>&
     }
 }
 
-Scene load_scene_within_memory(const std::string& name, std::span<const BuildPlan> plans,
-                               std::optional<uint64_t> memory_limit) {
+uint64_t frame_bytes(int width, int height, size_t images, bool stream, uint32_t stream_paths) {
+    const uint64_t image_bytes = uint64_t(width) * uint64_t(height) * 3 * sizeof(float);
+    // Per thread a batch: its paths, their rays and hits in path and in key order, and three key arrays.
+    const uint64_t path_bytes = sizeof(detail::StreamPath) + 2 * (sizeof(Ray) + sizeof(Hit)) + 3 * sizeof(uint32_t);
+    const uint64_t batches = stream ? uint64_t(tbb::info::default_concurrency()) * stream_paths * path_bytes : 0;
+    return images * image_bytes + batches;
+}
+
+Scene load_scene_within_memory(const std::string& name, std::span<const BuildPlan> plans, uint64_t frame_bytes,
+                               std::optional<uint64_t> memory_limit, MemoryEstimate* estimate) {
     const MemoryAvailable available = available_memory(memory_limit);
     return load_scene(name, [&](const SceneSize& size) {
-        require_memory(name.empty() ? "the default scene" : name, estimate_memory(size, plans), available);
+        MemoryEstimate e = estimate_memory(size, plans);
+        e.process = resident_bytes();
+        e.frames = frame_bytes;
+        require_memory(name.empty() ? "the default scene" : name, e, available);
+        if (estimate) *estimate = e;
     });
 }
 
@@ -90,7 +105,8 @@ void prepare_render(RenderOptions& o, PreparedRender& p) {
     if (!o.blas_builder.empty()) o.builder = o.blas_builder;  // a two-level render has no flat BVH
     const BuildPlan plan = o.accel == "embree" ? BuildPlan{"embree", 8, false}
                                                : BuildPlan{o.builder, kernel_width(o.kernel), o.toplevel != "flat"};
-    p.scene = load_scene_within_memory(o.scene, {&plan, 1}, o.memory_limit);
+    p.scene = load_scene_within_memory(o.scene, {&plan, 1}, frame_bytes(o.size[0], o.size[1], 1, o.tracer == "stream", o.stream_paths),
+                                       o.memory_limit);
     p.flat = flatten(p.scene);
     CanopyOptions options{o.builder, o.start, o.kernel, o.traversal == "robust", o.intersector == "watertight", o.toplevel,
                           o.frames_planned ? o.frames_planned : o.spp};

@@ -36,10 +36,14 @@ void print_progress(float fraction);
 // --blas-builder names the object trees' builder, which only two-level top levels have.
 void check_blas_builder(const std::string& blas, const std::vector<std::string>& toplevels);
 
+// What a scene's render or bench holds beside its trees: the images and the stream tracer's batches.
+uint64_t frame_bytes(int width, int height, size_t images, bool stream, uint32_t stream_paths);
+
 // load_scene, refused with a MemoryError when the scene and the planned builds would not fit in the memory
 // available (accel/memory_budget.h): a generator spec before it generates anything, a file before flatten().
-Scene load_scene_within_memory(const std::string& name, std::span<const BuildPlan> plans,
-                               std::optional<uint64_t> memory_limit);
+// `estimate`, when given, receives the estimate the scene was admitted with.
+Scene load_scene_within_memory(const std::string& name, std::span<const BuildPlan> plans, uint64_t frame_bytes,
+                               std::optional<uint64_t> memory_limit, MemoryEstimate* estimate = nullptr);
 
 void run_render(RenderOptions options);
 
