@@ -74,6 +74,7 @@ Scene load_scene_within_memory(const std::string& name, std::span<const BuildPla
     return load_scene(name, [&](const SceneSize& size) {
         MemoryEstimate e = estimate_memory(size, plans);
         e.process = resident_bytes();
+        if (!name.starts_with("gen:")) e.scene = 0;  // a file scene is sized once loaded: the process holds it already
         e.frames = frame_bytes;
         require_memory(name.empty() ? "the default scene" : name, e, available);
         if (estimate) *estimate = e;
