@@ -19,17 +19,21 @@ struct BuildPlan {
     bool two_level = false;          // a two-level or rebraided top level over object trees
 };
 
-// Bytes, by what holds them. Every term is an upper bound of its part at the build's peak, and the parts are
-// summed although some are freed before others are allocated (PrimRefs before the wide layout): the estimate
-// errs towards refusing, never towards being killed.
+// Bytes, by what holds them, at the build's peak as the builders' leaf policies and the layouts' bytes per triangle
+// make it: an expected figure (docs/results.md, "Memory estimate", compares it with measured peaks), not a worst case.
+// Each row's trees stay while later rows build; a build's scratch is counted where it outlives the trees' growth.
 struct MemoryEstimate {
+    uint64_t process = 0;     // what the process holds before loading: code, libraries, thread pools (the caller's)
     uint64_t scene = 0;       // the loaded or generated meshes
-    uint64_t flat = 0;        // world-space triangles and materials (flatten), object-space copies (two-level)
-    uint64_t references = 0;  // PrimRefs up to the builders' reference caps, and their partition scratch
+    uint64_t flat = 0;        // world-space triangles and materials (flatten), object-space copies (two-level),
+                              // Embree's vertex and index buffers
+    uint64_t references = 0;  // PrimRefs up to the builders' reference caps and their partition scratch, beyond the
+                              // layout written after they are freed; Embree's build scratch
     uint64_t binary = 0;      // binary BVH nodes and leaf references
-    uint64_t layout = 0;      // wide nodes and leaf triangle blocks; two-level pools and top-level entries
+    uint64_t layout = 0;      // wide nodes and leaf triangle blocks; two-level pools and top-level entries; Embree's BVH
+    uint64_t frames = 0;      // images and the stream tracer's batches (the caller's)
 
-    uint64_t total() const { return scene + flat + references + binary + layout; }
+    uint64_t total() const { return process + scene + flat + references + binary + layout + frames; }
     std::string describe() const;  // "61.3 GiB (scene 17.9 GiB, flat 14.9 GiB, ...)"
 };
 
@@ -55,6 +59,9 @@ struct MemoryError : std::runtime_error {
 
 // Throws MemoryError naming `what`, the estimate and the memory available when the estimate does not fit.
 void require_memory(const std::string& what, const MemoryEstimate& estimate, const MemoryAvailable& available);
+
+// This process's resident memory now (/proc/self/statm).
+uint64_t resident_bytes();
 
 // "1.5 GiB", "12.0 MiB", "512 bytes".
 std::string format_bytes(uint64_t bytes);

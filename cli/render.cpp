@@ -10,6 +10,9 @@
 #include "renderer/heatmap.h"
 #include "renderer/distributed.h"
 #include "renderer/sample_sum.h"
+#include "renderer/wavefront.h"
+
+#include <tbb/info.h>
 
 #include <CLI/CLI.hpp>
 #include <unistd.h>
@@ -63,7 +66,8 @@ void prepare_render(RenderOptions& o, PreparedRender& p) {
     if (!o.blas_builder.empty()) o.builder = o.blas_builder;  // a two-level render has no flat BVH
     const BuildPlan plan = o.accel == "embree" ? BuildPlan{"embree", 8, false}
                                                : BuildPlan{o.builder, kernel_width(o.kernel), o.toplevel != "flat"};
-    p.scene = load_scene_within_memory(o.scene, {&plan, 1}, o.memory_limit);
+    p.scene = load_scene_within_memory(o.scene, {&plan, 1}, frame_bytes(o.size[0], o.size[1], 1, o.tracer == "stream", o.stream_paths),
+                                       o.memory_limit);
     p.flat = flatten(p.scene);
     CanopyOptions options{o.builder, o.start, o.kernel, o.traversal == "robust", o.intersector == "watertight", o.toplevel,
                           o.frames_planned ? o.frames_planned : o.spp};

@@ -25,11 +25,16 @@ void check_blas_builder(const std::string& blas, const std::vector<std::string>&
     }
 }
 
-Scene load_scene_within_memory(const std::string& name, std::span<const BuildPlan> plans,
-                               std::optional<uint64_t> memory_limit) {
+Scene load_scene_within_memory(const std::string& name, std::span<const BuildPlan> plans, uint64_t frame_bytes,
+                               std::optional<uint64_t> memory_limit, MemoryEstimate* estimate) {
     const MemoryAvailable available = available_memory(memory_limit);
     return load_scene(name, [&](const SceneSize& size) {
-        require_memory(name.empty() ? "the default scene" : name, estimate_memory(size, plans), available);
+        MemoryEstimate e = estimate_memory(size, plans);
+        e.process = resident_bytes();
+        if (!name.starts_with("gen:")) e.scene = 0;  // a file scene is sized once loaded: the process holds it already
+        e.frames = frame_bytes;
+        require_memory(name.empty() ? "the default scene" : name, e, available);
+        if (estimate) *estimate = e;
     });
 }
 

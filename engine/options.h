@@ -16,9 +16,11 @@ std::string builder_names();
 // --blas-builder names the object trees' builder, which only two-level top levels have.
 void check_blas_builder(const std::string& blas, const std::vector<std::string>& toplevels);
 
-// load_scene, refused with a MemoryError when the scene and the planned builds would not fit in the memory
-// available (accel/memory_budget.h): a generator spec before it generates anything, a file before flatten().
-Scene load_scene_within_memory(const std::string& name, std::span<const BuildPlan> plans,
-                               std::optional<uint64_t> memory_limit);
+// load_scene, refused with a MemoryError when the scene, the planned builds and `frame_bytes` (images and the stream
+// tracer's batches) would not fit in the memory available (accel/memory_budget.h): a generator spec before it
+// generates anything, a file before flatten(). `estimate`, when given, receives the estimate the scene was admitted
+// with.
+Scene load_scene_within_memory(const std::string& name, std::span<const BuildPlan> plans, uint64_t frame_bytes,
+                               std::optional<uint64_t> memory_limit, MemoryEstimate* estimate = nullptr);
 
 }  // namespace canopy

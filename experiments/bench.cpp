@@ -533,12 +533,16 @@ struct LoadedScene {
     Scene scene;
     FlatScene flat;  // a dynamic object moves in it
     double load_ms = 0, flatten_ms = 0;
+    MemoryEstimate memory;  // the estimate the scene was admitted with
 };
 
 std::shared_ptr<LoadedScene> load_bench_scene(const BenchOptions& o) {
     auto loaded = std::make_shared<LoadedScene>();
     auto start = Clock::now();
-    loaded->scene = load_scene_within_memory(o.scene, build_plans(o), o.memory_limit);
+    const std::vector<BuildPlan> plans = build_plans(o);
+    const bool stream = std::count(o.tracers.begin(), o.tracers.end(), "stream") > 0;
+    const uint64_t frames = frame_bytes(o.width, o.height, plans.size() * o.tracers.size(), stream, o.stream_paths);
+    loaded->scene = load_scene_within_memory(o.scene, plans, frames, o.memory_limit, &loaded->memory);
     loaded->load_ms = ms_since(start);
     start = Clock::now();
     loaded->flat = flatten(loaded->scene);
@@ -588,6 +592,7 @@ nlohmann::json bench_scene(const BenchOptions& o, LoadedScene& loaded, SceneRepo
     out.printf("scene %s: %llu triangles; load %.1f ms, flatten %.1f ms, PrimRefs %.1f ms (not in build times)%s\n",
                o.scene.c_str(), (unsigned long long)tris, loaded.load_ms, loaded.flatten_ms, primref_ms,
                distributed::where().c_str());
+    out.printf("memory estimate: %s\n", loaded.memory.describe().c_str());
     const std::optional<DynamicObject> dynamic =
         o.dynamic ? std::optional(choose_dynamic_object(loaded.scene, loaded.flat, *o.dynamic)) : std::nullopt;
     if (dynamic) {

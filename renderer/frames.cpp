@@ -3,6 +3,8 @@
 #include "renderer/camera.h"
 #include "renderer/frames_of_width.h"
 
+#include <tbb/info.h>
+
 #include <stdexcept>
 
 namespace canopy {
@@ -44,6 +46,14 @@ std::pair<TraversalCounts, uint64_t> count_frame(const Accelerator& accel, const
         default: rays = count_of_width<8>(kernel, job, counts); break;
     }
     return {counts.combine([](TraversalCounts a, const TraversalCounts& b) { return a += b; }), rays};
+}
+
+uint64_t frame_bytes(int width, int height, size_t images, bool stream, uint32_t stream_paths) {
+    const uint64_t image_bytes = uint64_t(width) * uint64_t(height) * 3 * sizeof(float);
+    // Per thread a batch: its paths, their rays and hits in path and in key order, and three key arrays.
+    const uint64_t path_bytes = sizeof(detail::StreamPath) + 2 * (sizeof(Ray) + sizeof(Hit)) + 3 * sizeof(uint32_t);
+    const uint64_t batches = stream ? uint64_t(tbb::info::default_concurrency()) * stream_paths * path_bytes : 0;
+    return images * image_bytes + batches;
 }
 
 namespace {

@@ -29,6 +29,9 @@ uint64_t render(const Accelerator& accel, const ShadingScene& scene, const Pinho
 std::pair<TraversalCounts, uint64_t> count_frame(const Accelerator& accel, const ShadingScene& scene,
                                                  const PinholeCamera& camera, uint32_t frame);
 
+// What a render or bench holds beside its trees: `images` images and, for the stream tracer, its batches.
+uint64_t frame_bytes(int width, int height, size_t images, bool stream, uint32_t stream_paths);
+
 // `--builder auto`'s workload in the renderer: the planned frame's paths through the single-ray tracer, a sample of
 // its tiles (FrameSettings::sample_stride) at a time, with the scene's camera.
 std::shared_ptr<WorkloadSample> frame_sample(const Scene& scene, const FlatScene& flat, const FrameSettings& frame);

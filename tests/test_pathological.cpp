@@ -91,7 +91,8 @@ void check_every_builder(std::span<const Triangle> tris, const std::string& scen
         CHECK(double(stats.references) <= cap);
         CHECK(double(binary.split.reference_capacity) <= cap + 1.0);
         const BuildPlan plan{builder.name, 2, false};
-        CHECK(stats.bytes <= estimate_memory(size, {&plan, 1}).binary);
+        // The estimate expects two-triangle leaves; one-triangle leaves, the most nodes a tree has, double them.
+        CHECK(stats.bytes <= 2 * estimate_memory(size, {&plan, 1}).binary);
         CHECK(count_mismatches(rays, expected, trace_widest(binary, tris, rays), scene + " / " + builder.name) == 0);
     }
 }
