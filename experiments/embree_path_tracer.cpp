@@ -12,7 +12,6 @@
 #include <tbb/global_control.h>
 #include <tbb/parallel_for.h>
 
-#include <array>
 #include <chrono>
 #include <cstdio>
 #include <cstring>
@@ -34,7 +33,7 @@ constexpr int kTile = 16;       // square tiles of pixels, one TBB task each
 
 struct Options {
     std::string scene;
-    std::array<int, 2> size{1024, 768};
+    std::vector<int> size{1024, 768};
     int frames = 10;
     int threads = 0;
 };
