@@ -86,6 +86,7 @@ uint64_t timed_ns(F&& f) {
     return uint64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - start).count());
 }
 
+// The record a batch tracer's closest fills: its Record where it names one, else Hit.
 template <class BatchTracer>
 struct BatchRecord {
     using type = Hit;
