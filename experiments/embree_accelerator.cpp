@@ -1,5 +1,6 @@
 // Intel Embree 3 as the reference accelerator: same flat triangles, same path tracer, same camera and
-// random numbers as canopy; only the BVH build and traversal are Embree's.
+// random numbers as canopy; the BVH build and traversal are Embree's, and shading reads Embree's hit record alone
+// (normal, distance, triangle id), as an Embree user's renderer does, never the scene's triangles.
 #include "experiments/embree_accelerator.h"
 
 #include "renderer/wavefront.h"
@@ -10,6 +11,7 @@
 
 #include <atomic>
 #include <cstring>
+#include <limits>
 #include <stdexcept>
 
 namespace canopy {
@@ -35,40 +37,80 @@ void to_embree(const Ray& ray, RTCRayHit& rh) {
     rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
 }
 
-// Embree's answer as canopy's Hit, triangle ids numbered as in the flat scene.
-bool from_embree(const RTCRayHit& rh, const uint32_t* prim_offsets, Hit& hit) {
-    if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return false;
-    const uint32_t offset = prim_offsets && rh.hit.instID[0] != RTC_INVALID_GEOMETRY_ID ? prim_offsets[rh.hit.instID[0]] : 0;
-    hit = {rh.ray.tfar, rh.hit.u, rh.hit.v, offset + rh.hit.primID};
-    return true;
+// Two-level scenes: per instance, its first scene-wide triangle id and the matrix that takes its object-space normals
+// (which Embree reports for instanced triangles) to world space.
+struct EmbreeInstances {
+    const uint32_t* prim_offsets = nullptr;
+    const glm::mat3* normal_to_world = nullptr;
+};
+
+// Embree's hit record as the stream tracer keeps it: the distance, the world-space normal and the triangle id, all
+// that shading reads.
+struct EmbreeRecord {
+    float t = std::numeric_limits<float>::infinity();
+    uint32_t prim = Hit::kNone;
+    Vec3 normal{0.0f};
+    bool found() const { return prim != Hit::kNone; }
+};
+
+[[gnu::always_inline]] inline SurfaceHit shading_surface(const ShadingScene&, const Ray& ray, const EmbreeRecord& r) {
+    return ray_surface(ray, r.t, r.normal, r.prim);
 }
 
+// A hit's triangle id numbered as in the flat scene, and its normal in world space.
+[[gnu::always_inline]] inline EmbreeRecord record_of(const EmbreeInstances& instances, float t, uint32_t prim, uint32_t inst,
+                                                     const Vec3& ng) {
+    if (!instances.prim_offsets || inst == RTC_INVALID_GEOMETRY_ID) return {t, prim, ng};
+    return {t, instances.prim_offsets[inst] + prim, instances.normal_to_world[inst] * ng};
+}
+
+EmbreeRecord record_of(const EmbreeInstances& instances, const RTCRayHit& rh) {
+    if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return {};
+    return record_of(instances, rh.ray.tfar, rh.hit.primID, rh.hit.instID[0], Vec3(rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z));
+}
+
+// One ray at a time through rtcIntersect1; frames shade from Embree's hit record alone.
 struct EmbreeTracer {
     RTCScene scene;
-    const uint32_t* prim_offsets = nullptr;  // two-level: per instance, its first scene-wide triangle id
-    bool closest(const Ray& ray, Hit& hit) const {
+    EmbreeInstances instances;
+    RTCRayHit intersect(const Ray& ray) const {
         RTCIntersectContext context;
         rtcInitIntersectContext(&context);
         RTCRayHit rh;
         to_embree(ray, rh);
         rtcIntersect1(scene, &context, &rh);
-        return from_embree(rh, prim_offsets, hit);
+        return rh;
+    }
+    bool closest(const Ray& ray, SurfaceHit& surface) const {
+        const EmbreeRecord r = record_of(instances, intersect(ray));
+        if (!r.found()) return false;
+        surface = ray_surface(ray, r.t, r.normal, r.prim);
+        return true;
+    }
+    // Tests' and tools' query, with the barycentrics a Hit carries.
+    bool closest(const Ray& ray, Hit& hit) const {
+        const RTCRayHit rh = intersect(ray);
+        const EmbreeRecord r = record_of(instances, rh);
+        if (!r.found()) return false;
+        hit = {r.t, rh.hit.u, rh.hit.v, r.prim};
+        return true;
     }
 };
 
 // The stream tracer's batches through Embree's ray stream interface, rtcIntersect1M, told the rays are incoherent,
 // or in packets of 16 consecutive rays through rtcIntersect16 (FrameSettings::embree_packets).
 struct EmbreeBatchTracer {
+    using Record = EmbreeRecord;
     struct Scratch {
         std::vector<RTCRayHit> rays;
         RTCRayHit16 packet;
         size_t bytes() const { return rays.capacity() * sizeof(RTCRayHit) + sizeof(RTCRayHit16); }
     };
     RTCScene scene;
-    const uint32_t* prim_offsets = nullptr;
+    EmbreeInstances instances;
     bool packets = false;
 
-    void closest(std::span<const Ray> rays, std::span<Hit> hits, Scratch& scratch) const {
+    void closest(std::span<const Ray> rays, std::span<EmbreeRecord> hits, Scratch& scratch) const {
         if (packets) {
             for (size_t first = 0; first < rays.size(); first += 16)
                 closest16(rays.subspan(first, std::min<size_t>(16, rays.size() - first)), hits.subspan(first), scratch.packet);
@@ -80,13 +122,10 @@ struct EmbreeBatchTracer {
         rtcInitIntersectContext(&context);
         context.flags = RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
         rtcIntersect1M(scene, &context, scratch.rays.data(), unsigned(rays.size()), sizeof(RTCRayHit));
-        for (size_t i = 0; i < rays.size(); ++i) {
-            hits[i] = Hit{};
-            from_embree(scratch.rays[i], prim_offsets, hits[i]);
-        }
+        for (size_t i = 0; i < rays.size(); ++i) hits[i] = record_of(instances, scratch.rays[i]);
     }
 
-    void closest16(std::span<const Ray> rays, std::span<Hit> hits, RTCRayHit16& p) const {
+    void closest16(std::span<const Ray> rays, std::span<EmbreeRecord> hits, RTCRayHit16& p) const {
         alignas(64) int valid[16];
         for (size_t i = 0; i < 16; ++i) {
             valid[i] = i < rays.size() ? -1 : 0;
@@ -104,11 +143,10 @@ struct EmbreeBatchTracer {
         context.flags = RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
         rtcIntersect16(valid, scene, &context, &p);
         for (size_t i = 0; i < rays.size(); ++i) {
-            hits[i] = Hit{};
-            if (p.hit.geomID[i] == RTC_INVALID_GEOMETRY_ID) continue;
-            const uint32_t inst = p.hit.instID[0][i];
-            const uint32_t offset = prim_offsets && inst != RTC_INVALID_GEOMETRY_ID ? prim_offsets[inst] : 0;
-            hits[i] = {p.ray.tfar[i], p.hit.u[i], p.hit.v[i], offset + p.hit.primID[i]};
+            hits[i] = p.hit.geomID[i] == RTC_INVALID_GEOMETRY_ID
+                          ? EmbreeRecord{}
+                          : record_of(instances, p.ray.tfar[i], p.hit.primID[i], p.hit.instID[0][i],
+                                      Vec3(p.hit.Ng_x[i], p.hit.Ng_y[i], p.hit.Ng_z[i]));
         }
     }
 };
@@ -130,7 +168,10 @@ public:
         triangle_count_ = scene.triangles.size();
         if (objects) {
             objects_ = *objects;
-            for (TwoLevelInstance& i : objects_->instances) prim_offsets_.push_back(i.prim_offset);
+            for (TwoLevelInstance& i : objects_->instances) {
+                prim_offsets_.push_back(i.prim_offset);
+                normal_to_world_.push_back(normal_matrix(i.to_world));
+            }
             for (std::vector<Triangle>& tris : objects_->objects) tris.reserve(tris.size() + 1);  // Embree's padding
         }
     }
@@ -180,6 +221,7 @@ public:
         RTCGeometry geometry = rtcGetGeometry(scene_, objects_ ? move.placement : 0);
         if (objects_) {
             rtcSetGeometryTransform(geometry, 0, RTC_FORMAT_FLOAT4X4_COLUMN_MAJOR, &move.to_world[0][0]);
+            normal_to_world_[move.placement] = normal_matrix(move.to_world);
         } else {
             std::memcpy(vertices_.data() + size_t(move.first_triangle) * 9, flat_.triangles.data() + move.first_triangle,
                         size_t(move.triangle_count) * sizeof(Triangle));
@@ -193,13 +235,13 @@ public:
     uint64_t render(const ShadingScene& scene, const PinholeCamera& camera, uint32_t frame, Image& image,
                     const std::function<void(float)>& on_tile) const override {
         if (scene.settings.tracer == TracerKind::Stream)
-            return render_frame_stream(EmbreeBatchTracer{scene_, offsets(), scene.settings.embree_packets}, scene, camera, frame, image, on_tile);
-        return render_frame(EmbreeTracer{scene_, offsets()}, scene, camera, frame, image, on_tile);
+            return render_frame_stream(EmbreeBatchTracer{scene_, instances(), scene.settings.embree_packets}, scene, camera, frame, image, on_tile);
+        return render_frame(EmbreeTracer{scene_, instances()}, scene, camera, frame, image, on_tile);
     }
 
     Hit trace(const Ray& ray) const override {
         Hit hit;
-        EmbreeTracer{scene_, offsets()}.closest(ray, hit);
+        EmbreeTracer{scene_, instances()}.closest(ray, hit);
         return hit;
     }
 
@@ -218,7 +260,13 @@ public:
     }
 
 private:
-    const uint32_t* offsets() const { return objects_ ? prim_offsets_.data() : nullptr; }
+    EmbreeInstances instances() const {
+        if (!objects_) return {};
+        return {prim_offsets_.data(), normal_to_world_.data()};
+    }
+
+    // Normals transform by the inverse transpose of the instance's linear part.
+    static glm::mat3 normal_matrix(const glm::mat4& to_world) { return glm::transpose(glm::inverse(glm::mat3(to_world))); }
 
     void release_object_scenes() {
         for (RTCScene s : object_scenes_)
@@ -278,6 +326,7 @@ private:
     std::atomic<int64_t> build_bytes_{0};
     std::optional<TwoLevelInput> objects_;
     std::vector<uint32_t> prim_offsets_;
+    std::vector<glm::mat3> normal_to_world_;
     std::vector<RTCScene> object_scenes_;
 };
 

@@ -87,4 +87,12 @@ inline float triangle_point_error(const Triangle& t) {
     return 7.0f * 0x1p-24f / (1.0f - 7.0f * 0x1p-24f) * std::max(m.x, std::max(m.y, m.z));
 }
 
+// How far a hit point computed as org + t dir may lie from the surface, for an intersector that reports the distance
+// and the normal but not the triangle (Embree's hit record): the point's own rounding scales with its coordinates and
+// the distance travelled, and the distance carries the intersector's rounding, a few ulps of the same magnitudes;
+// 32 ulps of their sum covers both with a margin.
+inline float ray_point_error(const Vec3& p, float t) {
+    return 32.0f * 0x1p-24f * (std::max(std::abs(p.x), std::max(std::abs(p.y), std::abs(p.z))) + t);
+}
+
 }  // namespace canopy

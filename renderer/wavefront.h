@@ -7,7 +7,9 @@
 // and the ray count, are the single-path tracer's (up to exact ties between triangles).
 //
 // A batch tracer has `Scratch` (its per-thread memory, with `bytes()`) and
-// `void closest(std::span<const Ray>, std::span<Hit>, Scratch&) const`.
+// `void closest(std::span<const Ray>, std::span<Record>, Scratch&) const`, where Record is its `Record` if it names
+// one, else Hit: a record with `found()` that shading_surface turns into what shading reads (a Hit, through the
+// scene's copy of its triangle).
 #include "kernels/ray_order.h"
 #include "renderer/path_tracer.h"
 
@@ -19,6 +21,7 @@
 #include <atomic>
 #include <chrono>
 #include <span>
+#include <type_traits>
 
 namespace canopy {
 
@@ -46,17 +49,17 @@ struct StreamPath {
 // rays are sorted: the tracer reads them in key order, and their hits go back to their paths' places, so shading
 // reads paths, rays and hits in order and adds finished paths to the image in pixel order. Gathering the paths into
 // key order too cost more (it was three quarters of the sort's time, the paths being larger than rays and hits).
-template <class Scratch>
+template <class Scratch, class Record>
 struct Wavefront {
     std::vector<StreamPath> paths;
     std::vector<Ray> rays, sorted_rays;
-    std::vector<Hit> hits, sorted_hits;
+    std::vector<Record> hits, sorted_hits;
     std::vector<uint32_t> keys, order, radix_scratch;
     Scratch scratch;
 
     size_t bytes() const {
         return paths.capacity() * sizeof(StreamPath) + (rays.capacity() + sorted_rays.capacity()) * sizeof(Ray) +
-               (hits.capacity() + sorted_hits.capacity()) * sizeof(Hit) +
+               (hits.capacity() + sorted_hits.capacity()) * sizeof(Record) +
                (keys.capacity() + order.capacity() + radix_scratch.capacity()) * sizeof(uint32_t) + scratch.bytes();
     }
 
@@ -83,16 +86,36 @@ uint64_t timed_ns(F&& f) {
     return uint64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - start).count());
 }
 
+// The record a batch tracer's closest fills: its Record where it names one, else Hit.
+template <class BatchTracer>
+struct BatchRecord {
+    using type = Hit;
+};
+template <class BatchTracer>
+    requires requires { typename BatchTracer::Record; }
+struct BatchRecord<BatchTracer> {
+    using type = typename BatchTracer::Record;
+};
+
 // Shading reads the hit triangle, which tracing the whole batch has long evicted from the L1 and L2 caches (the
 // single-path tracer shades it just after testing it). Fetching it this many paths ahead hides that miss.
 constexpr uint32_t kShadePrefetch = 16;
 
-[[gnu::always_inline]] inline void prefetch_hit_triangle(const ShadingScene& scene, const std::vector<Hit>& hits,
+// Records that carry what shading reads (Embree's) have nothing to fetch.
+template <class Record>
+[[gnu::always_inline]] inline void prefetch_hit_triangle(const ShadingScene& scene, const std::vector<Record>& hits,
                                                          uint32_t i, uint32_t live) {
-    if (i < live && hits[i].found()) _mm_prefetch(reinterpret_cast<const char*>(&scene.flat.triangles[hits[i].prim]), _MM_HINT_T0);
+    if constexpr (std::is_same_v<Record, Hit>) {
+        if (i < live && hits[i].found()) _mm_prefetch(reinterpret_cast<const char*>(&scene.flat.triangles[hits[i].prim]), _MM_HINT_T0);
+    }
 }
 
 }  // namespace detail
+
+// What shading reads of a batch tracer's Hit: the scene's copy of its triangle.
+[[gnu::always_inline]] inline SurfaceHit shading_surface(const ShadingScene& scene, const Ray&, const Hit& hit) {
+    return triangle_surface(scene.flat.triangles[hit.prim], hit);
+}
 
 // Renders one sample per pixel of frame `frame` into `accumulated`, as render_frame does, through the tracer's batch
 // query. Returns rays traced. `on_batch` (optional) is called after each batch with the fraction of the frame done.
@@ -100,7 +123,8 @@ template <class BatchTracer>
 uint64_t render_frame_stream(const BatchTracer& tracer, const ShadingScene& scene, const PinholeCamera& camera,
                              uint32_t frame, Image& accumulated, const std::function<void(float)>& on_batch = {}) {
     StreamStats* const stats = scene.stream_stats;
-    using Wavefront = detail::Wavefront<typename BatchTracer::Scratch>;
+    using Record = typename detail::BatchRecord<BatchTracer>::type;
+    using Wavefront = detail::Wavefront<typename BatchTracer::Scratch, Record>;
     const int w = scene.settings.width;
     const uint64_t pixels = uint64_t(w) * uint64_t(scene.settings.height);
     // Equal batches of at most stream_paths paths, as many as a multiple of the threads, so no thread idles while
@@ -130,7 +154,7 @@ uint64_t render_frame_stream(const BatchTracer& tracer, const ShadingScene& scen
         for (int depth = 0; live > 0; ++depth) {
             sorting += detail::timed_ns([&] { wf.sort(live, key); });
             wf.sorted_hits.resize(live);
-            tracer.closest(std::span<const Ray>(wf.sorted_rays.data(), live), std::span<Hit>(wf.sorted_hits.data(), live), wf.scratch);
+            tracer.closest(std::span<const Ray>(wf.sorted_rays.data(), live), std::span<Record>(wf.sorted_hits.data(), live), wf.scratch);
             sorting += detail::timed_ns([&] { wf.unsort(live); });
             traced += live;
             uint32_t next_live = 0;
@@ -138,7 +162,9 @@ uint64_t render_frame_stream(const BatchTracer& tracer, const ShadingScene& scen
                 detail::prefetch_hit_triangle(scene, wf.hits, i + detail::kShadePrefetch, live);
                 detail::StreamPath& path = wf.paths[i];
                 Ray next;
-                if (shade_bounce(scene, wf.rays[i], wf.hits[i], wf.hits[i].found(), depth, path.state, path.rng, next)) {
+                const bool found = wf.hits[i].found();
+                const SurfaceHit surface = found ? shading_surface(scene, wf.rays[i], wf.hits[i]) : SurfaceHit{};
+                if (shade_bounce(scene, wf.rays[i], found, surface, depth, path.state, path.rng, next)) {
                     wf.paths[next_live] = path;
                     wf.rays[next_live++] = next;
                 } else {
