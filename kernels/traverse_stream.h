@@ -169,18 +169,26 @@ void trace_chunk(const WideBvh<N>& bvh, std::span<const Ray> rays, std::span<Hit
 
 }  // namespace detail
 
-enum class BatchTraversal { Single, Packet, Stream };
+// Adaptive: the wavefront tracer (renderer/wavefront.h) sends each chunk of a bounce to packets or single rays,
+// whichever it measured faster; a batch query given it on its own traces packets.
+enum class BatchTraversal { Single, Packet, Stream, Adaptive };
 
-// "single", "packet" or "stream"; throws std::invalid_argument naming the option for another name.
+// "single", "packet", "stream" or "adaptive"; throws std::invalid_argument naming the option for another name.
 inline BatchTraversal parse_batch_traversal(const std::string& name) {
     if (name == "single") return BatchTraversal::Single;
     if (name == "packet") return BatchTraversal::Packet;
     if (name == "stream") return BatchTraversal::Stream;
-    throw std::invalid_argument("--batch-traversal '" + name + "': known are single, packet, stream");
+    if (name == "adaptive") return BatchTraversal::Adaptive;
+    throw std::invalid_argument("--batch-traversal '" + name + "': known are single, packet, stream, adaptive");
 }
 
 inline const char* batch_traversal_name(BatchTraversal how) {
-    return how == BatchTraversal::Single ? "single" : how == BatchTraversal::Packet ? "packet" : "stream";
+    switch (how) {
+        case BatchTraversal::Single: return "single";
+        case BatchTraversal::Packet: return "packet";
+        case BatchTraversal::Stream: return "stream";
+        default: return "adaptive";
+    }
 }
 
 // Closest hit (Query::Closest) or any hit (Query::Any) of every ray of `rays` into `hits` (same length), each
@@ -190,7 +198,8 @@ template <Query Q, bool Robust = true, class TriangleTest = WatertightRay, int N
                                       StreamScratch<N>& scratch, BatchTraversal how = BatchTraversal::Single,
                                       Counter&& counter = {}) {
     if (how == BatchTraversal::Single) return detail::trace_each<Q, Robust, TriangleTest>(bvh, rays, hits, counter);
-    if (how == BatchTraversal::Packet) return traverse_packets<Q, Robust, TriangleTest>(bvh, rays, hits, counter);
+    if (how == BatchTraversal::Packet || how == BatchTraversal::Adaptive)
+        return traverse_packets<Q, Robust, TriangleTest>(bvh, rays, hits, counter);
     for (size_t i = 0; i < rays.size(); ++i) {
         hits[i] = Hit{};
         hits[i].t = rays[i].tmax;

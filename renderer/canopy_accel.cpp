@@ -61,6 +61,12 @@ struct CanopyBatchTracer {
     void closest(std::span<const Ray> rays, std::span<Hit> hits, Scratch& scratch) const {
         traverse_batch<Query::Closest, Robust, TriangleTest>(bvh, rays, hits, scratch, how);
     }
+    // The wavefront tracer's choice of kernel per chunk (renderer/wavefront.h), under BatchTraversal::Adaptive.
+    bool adaptive() const { return how == BatchTraversal::Adaptive; }
+    const void* tree() const { return &bvh; }
+    void closest(std::span<const Ray> rays, std::span<Hit> hits, Scratch& scratch, BatchTraversal kernel) const {
+        traverse_batch<Query::Closest, Robust, TriangleTest>(bvh, rays, hits, scratch, kernel);
+    }
 };
 
 // Calls f(robust, triangle test) with both as types, so each combination is its own compiled kernel.

@@ -1,5 +1,5 @@
 #pragma once
-// The wavefront path tracer (`--tracer stream`): the frame's pixels in batches of FrameSettings::stream_paths
+// The wavefront path tracer (`--tracer stream`): the frame's pixels in batches of at most FrameSettings::stream_paths
 // paths, each batch on one thread; a batch's live paths advance one bounce at a time: their rays are sorted
 // (kernels/ray_order.h), traced as one batch through the tracer's batch query, shaded by the same shade_bounce as
 // the single-path tracer, and the paths still alive compacted for the next bounce. A path keeps its own random
@@ -7,7 +7,10 @@
 // and the ray count, are the single-path tracer's (up to exact ties between triangles).
 //
 // A batch tracer has `Scratch` (its per-thread memory, with `bytes()`) and
-// `void closest(std::span<const Ray>, std::span<Hit>, Scratch&) const`.
+// `void closest(std::span<const Ray>, std::span<Hit>, Scratch&) const`. A tracer that can trace a batch either in
+// packets or ray by ray also has `bool adaptive() const`, `const void* tree() const` and
+// `void closest(std::span<const Ray>, std::span<Hit>, Scratch&, BatchTraversal) const`: when adaptive() holds, each
+// bounce's rays go, a chunk at a time, through whichever of the two kernels measured faster (chunk_kernel).
 #include "kernels/ray_order.h"
 #include "renderer/path_tracer.h"
 
@@ -34,6 +37,61 @@ inline uint64_t working_threads() {
                             tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
 }
 
+// How a frame's pixels are dealt into batches: runs of `span` consecutive pixels, run k to batch k mod `batches`, so
+// that every batch holds the same mix of sky and geometry and the threads finish together, as the single-path
+// tracer's small tiles do.
+struct BatchPlan {
+    uint64_t batches, span, pixels;
+
+    // At most `most` paths a batch, and at least kBatchesPerThread batches a thread (a frame of fewer paths than one
+    // batch would otherwise leave every other thread idle), as many as a multiple of the threads.
+    static constexpr uint64_t kBatchesPerThread = 2;
+    static constexpr uint64_t kSpan = 16;  // a packet's rays: a primary packet is one run of neighbouring pixels
+    static BatchPlan of(uint64_t pixels, uint64_t most, uint64_t threads) {
+        most = std::max<uint64_t>(1, most), threads = std::max<uint64_t>(1, threads);
+        const uint64_t span = std::min(kSpan, most), spans = (pixels + span - 1) / span;
+        uint64_t batches = (spans + most / span - 1) / (most / span);
+        batches = std::max(batches, threads * kBatchesPerThread);
+        batches = (batches + threads - 1) / threads * threads;
+        return {std::max<uint64_t>(1, std::min(batches, spans)), span, pixels};
+    }
+    // Calls f(pixel) for every pixel of batch `b`, in raster order.
+    template <class F>
+    void for_each_pixel(uint64_t b, F&& f) const {
+        for (uint64_t first = b * span; first < pixels; first += batches * span)
+            for (uint64_t p = first; p < std::min(first + span, pixels); ++p) f(uint32_t(p));
+    }
+};
+
+// What the packet kernel (kernel 0) and the single-ray kernel (kernel 1) took per ray at one bounce depth of one
+// thread's batches: this bounce's chunks, plus the earlier bounces' sums halved at each new bounce.
+struct KernelCost {
+    double ns[2] = {0.0, 0.0}, rays[2] = {0.0, 0.0};
+
+    void add(BatchTraversal kernel, uint64_t spent_ns, uint64_t traced) {
+        const int k = kernel == BatchTraversal::Packet ? 0 : 1;
+        ns[k] += double(spent_ns), rays[k] += double(traced);
+    }
+    void age() {
+        for (int k = 0; k < 2; ++k) ns[k] *= 0.5, rays[k] *= 0.5;
+    }
+};
+
+// Rays a bounce traces through one kernel before the choice is made again.
+constexpr uint32_t kChooseChunk = 256;
+// One chunk in this many goes through the kernel that measured slower, so that a change of the winner is noticed.
+constexpr uint32_t kProbeEvery = 16;
+
+// The kernel for a bounce's `chunk`-th chunk: each kernel until it has been measured (packets first), then the one
+// with the lower time per ray, except every kProbeEvery-th chunk, which goes through the other one.
+inline BatchTraversal chunk_kernel(const KernelCost& cost, uint32_t chunk) {
+    if (cost.rays[0] == 0.0) return BatchTraversal::Packet;
+    if (cost.rays[1] == 0.0) return BatchTraversal::Single;
+    const bool packets_faster = cost.ns[0] * cost.rays[1] <= cost.ns[1] * cost.rays[0];
+    const bool probe = chunk % kProbeEvery == kProbeEvery - 1;
+    return packets_faster != probe ? BatchTraversal::Packet : BatchTraversal::Single;
+}
+
 namespace detail {
 
 struct StreamPath {
@@ -52,7 +110,11 @@ struct Wavefront {
     std::vector<Ray> rays, sorted_rays;
     std::vector<Hit> hits, sorted_hits;
     std::vector<uint32_t> keys, order, radix_scratch;
+    bool sorted = false;  // whether this bounce's rays are traced from sorted_rays into sorted_hits
     Scratch scratch;
+    // Adaptive tracers: each depth's kernel costs, kept from batch to batch and frame to frame of one tree.
+    std::vector<KernelCost> costs;
+    const void* costs_tree = nullptr;
 
     size_t bytes() const {
         return paths.capacity() * sizeof(StreamPath) + (rays.capacity() + sorted_rays.capacity()) * sizeof(Ray) +
@@ -60,8 +122,17 @@ struct Wavefront {
                (keys.capacity() + order.capacity() + radix_scratch.capacity()) * sizeof(uint32_t) + scratch.bytes();
     }
 
-    // The first `live` rays in key order, into sorted_rays.
-    void sort(uint32_t live, const RayOrderKey& key) {
+    // The first `live` rays in key order, into sorted_rays. The key's cells divide the box of these rays' origins,
+    // not the scene's: a view of a small part of a large scene still sorts its rays into many cells. Rays from one
+    // point (a pinhole camera's) stay in pixel order: their runs of neighbouring pixels are coherent packets already,
+    // and a key of octant alone would only pay a full sort to pull the runs apart.
+    void sort(uint32_t live) {
+        BBox origins;
+        for (uint32_t i = 0; i < live; ++i)
+            if (std::isfinite(rays[i].org.x) && std::isfinite(rays[i].org.y) && std::isfinite(rays[i].org.z)) origins.extend(rays[i].org);
+        sorted = origins.lower != origins.upper;
+        if (!sorted) return;
+        const RayOrderKey key(origins);
         keys.resize(live);
         for (uint32_t i = 0; i < live; ++i) keys[i] = key(rays[i]);
         radix_order(keys, order, radix_scratch);
@@ -69,8 +140,17 @@ struct Wavefront {
         for (uint32_t i = 0; i < live; ++i) sorted_rays[i] = rays[order[i]];
     }
 
+    // The rays of this bounce in the order they are traced, and where their hits go.
+    std::span<const Ray> traced_rays(uint32_t live) const { return {(sorted ? sorted_rays : rays).data(), live}; }
+    std::span<Hit> traced_hits(uint32_t live) {
+        std::vector<Hit>& into = sorted ? sorted_hits : hits;
+        into.resize(live);
+        return {into.data(), live};
+    }
+
     // Each sorted ray's hit back to its path's place.
     void unsort(uint32_t live) {
+        if (!sorted) return;
         hits.resize(live);
         for (uint32_t i = 0; i < live; ++i) hits[order[i]] = sorted_hits[i];
     }
@@ -81,6 +161,32 @@ uint64_t timed_ns(F&& f) {
     const auto start = std::chrono::steady_clock::now();
     f();
     return uint64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - start).count());
+}
+
+template <class BatchTracer>
+constexpr bool can_adapt = requires(const BatchTracer& t) { t.adaptive(); };
+
+// The rays of one bounce at `depth`, in the order sort left them: in one call, or, for an adaptive tracer, chunk by
+// chunk through the kernel chunk_kernel picks from this thread's costs at that depth.
+template <class BatchTracer, class Scratch>
+void trace_bounce(const BatchTracer& tracer, Wavefront<Scratch>& wf, uint32_t live, int depth) {
+    const std::span<const Ray> rays = wf.traced_rays(live);
+    const std::span<Hit> hits = wf.traced_hits(live);
+    if constexpr (can_adapt<BatchTracer>) {
+        if (tracer.adaptive()) {
+            if (wf.costs_tree != tracer.tree()) wf.costs.clear(), wf.costs_tree = tracer.tree();
+            if (wf.costs.size() <= size_t(depth)) wf.costs.resize(size_t(depth) + 1);
+            KernelCost& cost = wf.costs[size_t(depth)];
+            cost.age();
+            for (uint32_t begin = 0, chunk = 0; begin < live; begin += kChooseChunk, ++chunk) {
+                const uint32_t n = std::min(kChooseChunk, live - begin);
+                const BatchTraversal kernel = chunk_kernel(cost, chunk);
+                cost.add(kernel, timed_ns([&] { tracer.closest(rays.subspan(begin, n), hits.subspan(begin, n), wf.scratch, kernel); }), n);
+            }
+            return;
+        }
+    }
+    tracer.closest(rays, hits, wf.scratch);
 }
 
 // Shading reads the hit triangle, which tracing the whole batch has long evicted from the L1 and L2 caches (the
@@ -102,35 +208,25 @@ uint64_t render_frame_stream(const BatchTracer& tracer, const ShadingScene& scen
     StreamStats* const stats = scene.stream_stats;
     using Wavefront = detail::Wavefront<typename BatchTracer::Scratch>;
     const int w = scene.settings.width;
-    const uint64_t pixels = uint64_t(w) * uint64_t(scene.settings.height);
-    // Equal batches of at most stream_paths paths, as many as a multiple of the threads, so no thread idles while
-    // another traces a last batch alone.
-    const uint64_t threads = working_threads();
-    const uint64_t most = std::max<uint32_t>(1, scene.settings.stream_paths);
-    uint64_t batches = (pixels + most - 1) / most;
-    if (batches > 1) batches = (batches + threads - 1) / threads * threads;
-    const uint64_t batch = (pixels + batches - 1) / batches;
-    const RayOrderKey key(scene.flat.bounds);
+    const BatchPlan plan = BatchPlan::of(uint64_t(w) * uint64_t(scene.settings.height), scene.settings.stream_paths,
+                                         working_threads());
     static tbb::enumerable_thread_specific<Wavefront> wavefronts;  // reused from frame to frame
     std::atomic<uint64_t> rays{0}, done{0}, sort_ns{0};
-    tbb::parallel_for(uint64_t(0), batches, [&](uint64_t b) {
+    tbb::parallel_for(uint64_t(0), plan.batches, uint64_t(1), [&](uint64_t b) {
         Wavefront& wf = wavefronts.local();
-        const uint64_t first = std::min(b * batch, pixels);
-        uint32_t live = uint32_t(std::min(batch, pixels - first));
-        wf.paths.resize(live);
-        wf.rays.resize(live);
-        for (uint32_t i = 0; i < live; ++i) {
-            const uint32_t pixel = uint32_t(first + i);
+        wf.paths.clear();
+        wf.rays.clear();
+        plan.for_each_pixel(b, [&](uint32_t pixel) {
             const int x = int(pixel % uint32_t(w)), y = int(pixel / uint32_t(w));
-            wf.paths[i] = {PathState{}, Rng(uint64_t(y) * uint64_t(w) + uint64_t(x), frame), pixel};
-            const float u = wf.paths[i].rng.next_float(), v = wf.paths[i].rng.next_float();
-            wf.rays[i] = camera.generate(x, y, u, v);
-        }
+            wf.paths.push_back({PathState{}, Rng(uint64_t(y) * uint64_t(w) + uint64_t(x), frame), pixel});
+            const float u = wf.paths.back().rng.next_float(), v = wf.paths.back().rng.next_float();
+            wf.rays.push_back(camera.generate(x, y, u, v));
+        });
+        uint32_t live = uint32_t(wf.paths.size());
         uint64_t traced = 0, sorting = 0;
         for (int depth = 0; live > 0; ++depth) {
-            sorting += detail::timed_ns([&] { wf.sort(live, key); });
-            wf.sorted_hits.resize(live);
-            tracer.closest(std::span<const Ray>(wf.sorted_rays.data(), live), std::span<Hit>(wf.sorted_hits.data(), live), wf.scratch);
+            sorting += detail::timed_ns([&] { wf.sort(live); });
+            detail::trace_bounce(tracer, wf, live, depth);
             sorting += detail::timed_ns([&] { wf.unsort(live); });
             traced += live;
             uint32_t next_live = 0;
@@ -149,7 +245,7 @@ uint64_t render_frame_stream(const BatchTracer& tracer, const ShadingScene& scen
         }
         rays += traced;
         sort_ns += sorting;
-        if (on_batch) on_batch(float(done.fetch_add(1) + 1) / float(batches));
+        if (on_batch) on_batch(float(done.fetch_add(1) + 1) / float(plan.batches));
     });
     if (stats) {
         stats->sort_ns += sort_ns;

@@ -264,10 +264,10 @@ struct Frame {
 };
 
 Frame render_with(const Accelerator& accel, const Scene& scene, const FlatScene& flat, TracerKind tracer, uint32_t paths,
-                  int bounces = 8) {
+                  BatchTraversal how = BatchTraversal::Adaptive) {
     FrameSettings settings;
-    settings.width = 48, settings.height = 36, settings.max_bounces = bounces;
-    settings.tracer = tracer, settings.stream_paths = paths;
+    settings.width = 48, settings.height = 36;
+    settings.tracer = tracer, settings.stream_paths = paths, settings.batch_traversal = how;
     StreamStats stats;
     const ShadingScene shading{flat, settings, &stats};
     Image image(settings.width, settings.height);
@@ -290,13 +290,14 @@ TEST_CASE("the stream tracer renders the single-path tracer's paths", "[stream]"
             accel->prepare();
             accel->build();
             const Frame single = render_with(*accel, scene, flat, TracerKind::Single, 0);
-            // Batches that split the image unevenly, a path each, and the whole frame in one batch.
-            for (uint32_t paths : {1u, 97u, 1u << 16}) {
-                INFO(spec << " " << kernel << ", " << paths << " paths a batch");
-                const Frame stream = render_with(*accel, scene, flat, TracerKind::Stream, paths);
-                CHECK(stream.rays == single.rays);
-                CHECK(stream.pixels == single.pixels);
-            }
+            // Batches that split the image unevenly, a path each, and a frame of fewer paths than one batch.
+            for (uint32_t paths : {1u, 97u, 1u << 16})
+                for (BatchTraversal how : {BatchTraversal::Packet, BatchTraversal::Single, BatchTraversal::Adaptive}) {
+                    INFO(spec << " " << kernel << ", " << paths << " paths a batch, " << batch_traversal_name(how));
+                    const Frame stream = render_with(*accel, scene, flat, TracerKind::Stream, paths, how);
+                    CHECK(stream.rays == single.rays);
+                    CHECK(stream.pixels == single.pixels);
+                }
         }
     }
 }
@@ -312,4 +313,53 @@ TEST_CASE("Embree's stream rows trace the same paths as its single rows", "[stre
     // Embree's stream and single kernels may round differently: statistics, not bits.
     CHECK(double(stream.rays) == Approx(double(single.rays)).epsilon(0.001));
     CHECK(stream.mean == Approx(single.mean).epsilon(0.005));
+}
+
+TEST_CASE("a frame's batches hold every pixel once, at most the batch size, at least two a thread", "[stream]") {
+    struct Case {
+        uint64_t pixels, most, threads;
+    };
+    for (const Case c : {Case{512 * 384, 1u << 18, 2}, Case{1024 * 768, 1u << 18, 2}, Case{1728, 1, 2}, Case{1728, 97, 3},
+                         Case{1728, 1u << 16, 8}, Case{5, 1u << 18, 4}, Case{0, 16, 2}}) {
+        INFO(c.pixels << " pixels, batches of at most " << c.most << ", " << c.threads << " threads");
+        const BatchPlan plan = BatchPlan::of(c.pixels, c.most, c.threads);
+        std::vector<int> seen(c.pixels, 0);
+        for (uint64_t b = 0; b < plan.batches; ++b) {
+            uint64_t paths = 0;
+            uint32_t previous = 0;
+            plan.for_each_pixel(b, [&](uint32_t pixel) {
+                CHECK((paths == 0 || pixel > previous));  // raster order
+                previous = pixel;
+                ++seen[pixel], ++paths;
+            });
+            CHECK(paths <= c.most);
+        }
+        CHECK(std::all_of(seen.begin(), seen.end(), [](int n) { return n == 1; }));
+        // Every thread has batches where there are pixels enough (a frame smaller than one batch included).
+        const uint64_t spans = (c.pixels + plan.span - 1) / plan.span;
+        CHECK(plan.batches >= std::min(spans, c.threads * BatchPlan::kBatchesPerThread));
+        if (plan.batches < spans) CHECK(plan.batches % c.threads == 0);
+    }
+    // The small-frame case that left a thread idle: 512 x 384 paths, fewer than one batch of 2^18.
+    CHECK(BatchPlan::of(512 * 384, 1u << 18, 2).batches == 4);
+}
+
+TEST_CASE("the adaptive tracer measures both kernels, then takes the faster and probes the other", "[stream]") {
+    KernelCost cost;
+    CHECK(chunk_kernel(cost, 0) == BatchTraversal::Packet);
+    cost.add(BatchTraversal::Packet, 1000, 100);
+    CHECK(chunk_kernel(cost, 1) == BatchTraversal::Single);
+    cost.add(BatchTraversal::Single, 1500, 100);  // packets 10 ns a ray, single rays 15
+    int single = 0;
+    for (uint32_t chunk = 0; chunk < 4 * kProbeEvery; ++chunk) single += chunk_kernel(cost, chunk) == BatchTraversal::Single;
+    CHECK(single == 4);
+    CHECK(chunk_kernel(cost, kProbeEvery - 1) == BatchTraversal::Single);
+    // Single rays become faster: 2000 rays at 5 ns outweigh the packets' 10 ns, and the probes go to packets.
+    cost.add(BatchTraversal::Single, 10000, 2000);
+    CHECK(chunk_kernel(cost, 0) == BatchTraversal::Single);
+    CHECK(chunk_kernel(cost, kProbeEvery - 1) == BatchTraversal::Packet);
+    // Aging halves both kernels' sums alike: the choice stands, and no kernel becomes unmeasured.
+    cost.age();
+    CHECK(chunk_kernel(cost, 0) == BatchTraversal::Single);
+    CHECK(cost.rays[0] > 0.0);
 }

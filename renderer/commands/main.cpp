@@ -29,8 +29,9 @@ constexpr const char* kLayoutHelp =
     "bvh8 nodes: standard (256 bytes, float planes) or compressed (128 bytes, planes quantised to 8 bits, "
     "conservatively; single-ray tracer only)";
 constexpr const char* kBatchTraversalHelp =
-    "Stream tracer: how canopy traces a sorted batch: packet (16-ray packets, 8 without AVX-512, single rays below "
-    "10; the fastest on diffuse rays), single (ray by ray), stream (ray streams)";
+    "Stream tracer: how canopy traces a sorted batch: adaptive (each chunk of a bounce through packets or single "
+    "rays, whichever measured faster at that bounce), packet (16-ray packets, 8 without AVX-512, single rays below "
+    "10), single (ray by ray), stream (ray streams)";
 
 constexpr const char* kCollapseHelp =
     "How bvh4/bvh8 are made from the binary tree: optimal (Ylitie et al. 2017), greedy (largest area first), or, for "
@@ -102,7 +103,7 @@ int main(int argc, char** argv) {
     render->add_option("--stream-paths", r.stream_paths, "Stream tracer: paths in flight per batch")
         ->check(CLI::Range(1, 1 << 24))->capture_default_str();
     render->add_option("--batch-traversal", r.batch_traversal, kBatchTraversalHelp)
-        ->check(CLI::IsMember({"single", "packet", "stream"}))->capture_default_str();
+        ->check(CLI::IsMember({"single", "packet", "stream", "adaptive"}))->capture_default_str();
     render->add_option("--memory-limit", r.memory_limit, kMemoryLimitHelp)->transform(CLI::AsSizeValue(false));
     render->add_option("--collapse", r.collapse, kCollapseHelp)->check(CLI::IsMember({"optimal", "greedy", "direct"}));
     render->add_option("--layout", r.layout, kLayoutHelp)->check(CLI::IsMember({"standard", "compressed"}))->capture_default_str();
@@ -161,7 +162,7 @@ int main(int argc, char** argv) {
     bench->add_option("--stream-paths", b.stream_paths, "Stream tracer: paths in flight per batch")
         ->check(CLI::Range(1, 1 << 24))->capture_default_str();
     bench->add_option("--batch-traversal", b.batch_traversals, std::string(kBatchTraversalHelp) + "; a stream row each")
-        ->delimiter(',')->check(CLI::IsMember({"single", "packet", "stream"}))->capture_default_str();
+        ->delimiter(',')->check(CLI::IsMember({"single", "packet", "stream", "adaptive"}))->capture_default_str();
     bench->add_option("--embree-stream", b.embree_streams,
                       "Stream tracer: Embree's batch interface, a stream row each: 1m (rtcIntersect1M, incoherent), 16 (rtcIntersect16 packets)")
         ->delimiter(',')->check(CLI::IsMember({"1m", "16"}))->capture_default_str();
