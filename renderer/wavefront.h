@@ -37,29 +37,37 @@ inline uint64_t working_threads() {
                             tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
 }
 
-// How a frame's pixels are dealt into batches: runs of `span` consecutive pixels, run k to batch k mod `batches`, so
-// that every batch holds the same mix of sky and geometry and the threads finish together, as the single-path
-// tracer's small tiles do.
+// How a frame's pixels are dealt into batches: square tiles of `side` pixels, tile k (in raster order) to batch k
+// mod `batches`, each tile's pixels row by row. Every batch holds the same mix of sky and geometry, so the threads
+// finish together, and a batch's camera rays reach the scene tile by tile, as the single-path tracer's do, so that
+// neighbouring rays find its nodes in cache (a row of spans across the whole image did not).
 struct BatchPlan {
-    uint64_t batches, span, pixels;
+    uint64_t batches, side, width, height;
 
     // At most `most` paths a batch, and at least kBatchesPerThread batches a thread (a frame of fewer paths than one
     // batch would otherwise leave every other thread idle), as many as a multiple of the threads.
     static constexpr uint64_t kBatchesPerThread = 2;
-    static constexpr uint64_t kSpan = 16;  // a packet's rays: a primary packet is one run of neighbouring pixels
-    static BatchPlan of(uint64_t pixels, uint64_t most, uint64_t threads) {
+    static constexpr uint64_t kSide = 16;  // a tile row is a packet's rays
+    static BatchPlan of(uint64_t width, uint64_t height, uint64_t most, uint64_t threads) {
         most = std::max<uint64_t>(1, most), threads = std::max<uint64_t>(1, threads);
-        const uint64_t span = std::min(kSpan, most), spans = (pixels + span - 1) / span;
-        uint64_t batches = (spans + most / span - 1) / (most / span);
+        uint64_t side = kSide;
+        while (side > 1 && side * side > most) side /= 2;
+        const uint64_t tiles = (width + side - 1) / side * ((height + side - 1) / side);
+        const uint64_t per_batch = most / (side * side);
+        uint64_t batches = (tiles + per_batch - 1) / per_batch;
         batches = std::max(batches, threads * kBatchesPerThread);
         batches = (batches + threads - 1) / threads * threads;
-        return {std::max<uint64_t>(1, std::min(batches, spans)), span, pixels};
+        return {std::max<uint64_t>(1, std::min(batches, tiles)), side, width, height};
     }
-    // Calls f(pixel) for every pixel of batch `b`, in raster order.
+    // Calls f(pixel) for every pixel (y * width + x) of batch `b`.
     template <class F>
     void for_each_pixel(uint64_t b, F&& f) const {
-        for (uint64_t first = b * span; first < pixels; first += batches * span)
-            for (uint64_t p = first; p < std::min(first + span, pixels); ++p) f(uint32_t(p));
+        const uint64_t tiles_x = (width + side - 1) / side, tiles = tiles_x * ((height + side - 1) / side);
+        for (uint64_t t = b; t < tiles; t += batches) {
+            const uint64_t x0 = t % tiles_x * side, y0 = t / tiles_x * side;
+            for (uint64_t y = y0; y < std::min(y0 + side, height); ++y)
+                for (uint64_t x = x0; x < std::min(x0 + side, width); ++x) f(uint32_t(y * width + x));
+        }
     }
 };
 
@@ -208,7 +216,7 @@ uint64_t render_frame_stream(const BatchTracer& tracer, const ShadingScene& scen
     StreamStats* const stats = scene.stream_stats;
     using Wavefront = detail::Wavefront<typename BatchTracer::Scratch>;
     const int w = scene.settings.width;
-    const BatchPlan plan = BatchPlan::of(uint64_t(w) * uint64_t(scene.settings.height), scene.settings.stream_paths,
+    const BatchPlan plan = BatchPlan::of(uint64_t(w), uint64_t(scene.settings.height), scene.settings.stream_paths,
                                          working_threads());
     static tbb::enumerable_thread_specific<Wavefront> wavefronts;  // reused from frame to frame
     std::atomic<uint64_t> rays{0}, done{0}, sort_ns{0};

@@ -317,31 +317,30 @@ TEST_CASE("Embree's stream rows trace the same paths as its single rows", "[stre
 
 TEST_CASE("a frame's batches hold every pixel once, at most the batch size, at least two a thread", "[stream]") {
     struct Case {
-        uint64_t pixels, most, threads;
+        uint64_t width, height, most, threads;
     };
-    for (const Case c : {Case{512 * 384, 1u << 18, 2}, Case{1024 * 768, 1u << 18, 2}, Case{1728, 1, 2}, Case{1728, 97, 3},
-                         Case{1728, 1u << 16, 8}, Case{5, 1u << 18, 4}, Case{0, 16, 2}}) {
-        INFO(c.pixels << " pixels, batches of at most " << c.most << ", " << c.threads << " threads");
-        const BatchPlan plan = BatchPlan::of(c.pixels, c.most, c.threads);
-        std::vector<int> seen(c.pixels, 0);
+    for (const Case c : {Case{512, 384, 1u << 18, 2}, Case{1024, 768, 1u << 18, 2}, Case{48, 36, 1, 2}, Case{48, 36, 97, 3},
+                         Case{48, 36, 1u << 16, 8}, Case{5, 1, 1u << 18, 4}, Case{0, 0, 16, 2}, Case{33, 17, 300, 2}}) {
+        INFO(c.width << " x " << c.height << " pixels, batches of at most " << c.most << ", " << c.threads << " threads");
+        const BatchPlan plan = BatchPlan::of(c.width, c.height, c.most, c.threads);
+        std::vector<int> seen(c.width * c.height, 0);
         for (uint64_t b = 0; b < plan.batches; ++b) {
             uint64_t paths = 0;
-            uint32_t previous = 0;
-            plan.for_each_pixel(b, [&](uint32_t pixel) {
-                CHECK((paths == 0 || pixel > previous));  // raster order
-                previous = pixel;
-                ++seen[pixel], ++paths;
-            });
+            plan.for_each_pixel(b, [&](uint32_t pixel) { ++seen[pixel], ++paths; });
             CHECK(paths <= c.most);
         }
         CHECK(std::all_of(seen.begin(), seen.end(), [](int n) { return n == 1; }));
-        // Every thread has batches where there are pixels enough (a frame smaller than one batch included).
-        const uint64_t spans = (c.pixels + plan.span - 1) / plan.span;
-        CHECK(plan.batches >= std::min(spans, c.threads * BatchPlan::kBatchesPerThread));
-        if (plan.batches < spans) CHECK(plan.batches % c.threads == 0);
+        // Every thread has batches where there are tiles enough (a frame smaller than one batch included).
+        const uint64_t tiles = (c.width + plan.side - 1) / plan.side * ((c.height + plan.side - 1) / plan.side);
+        CHECK(plan.batches >= std::min(tiles, c.threads * BatchPlan::kBatchesPerThread));
+        if (plan.batches < tiles) CHECK(plan.batches % c.threads == 0);
     }
     // The small-frame case that left a thread idle: 512 x 384 paths, fewer than one batch of 2^18.
-    CHECK(BatchPlan::of(512 * 384, 1u << 18, 2).batches == 4);
+    CHECK(BatchPlan::of(512, 384, 1u << 18, 2).batches == 4);
+    // A batch's first 16 paths are its first tile's top row: a packet of neighbouring camera rays.
+    std::vector<uint32_t> first;
+    BatchPlan::of(1024, 768, 1u << 18, 2).for_each_pixel(1, [&](uint32_t pixel) { first.push_back(pixel); });
+    for (uint32_t i = 0; i < 17; ++i) CHECK(first[i] == (i < 16 ? 16 + i : 1024 + 16));
 }
 
 TEST_CASE("the adaptive tracer measures both kernels, then takes the faster and probes the other", "[stream]") {
