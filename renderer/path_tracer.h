@@ -27,7 +27,7 @@ struct FrameSettings {
     // rays: crytek-sponza stream frames 0.950x, 0.924x and 0.922x the single tracer's with 64k, 256k and 512k (one
     // run), at 25, 74 and 148 MB for two threads.
     uint32_t stream_paths = 1u << 18;
-    BatchTraversal batch_traversal = BatchTraversal::Adaptive;  // stream: how canopy's kernels trace a batch
+    BatchTraversal batch_traversal = BatchTraversal::Packet;  // stream: how canopy's kernels trace a batch
     bool embree_packets = false;  // stream: Embree's batches in rtcIntersect16 packets, not through rtcIntersect1M
     int max_bounces = 8;           // at most max_bounces + 1 closest-hit rays per path
     // The single tracer traces only a sample of the frame's pixels, one 8 x 8 tile in each `sample_stride` (1: the

@@ -29,9 +29,9 @@ constexpr const char* kLayoutHelp =
     "bvh8 nodes: standard (256 bytes, float planes) or compressed (128 bytes, planes quantised to 8 bits, "
     "conservatively; single-ray tracer only)";
 constexpr const char* kBatchTraversalHelp =
-    "Stream tracer: how canopy traces a sorted batch: adaptive (each chunk of a bounce through packets or single "
-    "rays, whichever measured faster at that bounce), packet (16-ray packets, 8 without AVX-512, single rays below "
-    "10), single (ray by ray), stream (ray streams)";
+    "Stream tracer: how canopy traces a sorted batch: packet (16-ray packets, 8 without AVX-512, single rays below "
+    "10; the fastest measured), adaptive (each chunk of a bounce through packets or single rays, whichever measured "
+    "faster at that bounce), single (ray by ray), stream (ray streams)";
 
 constexpr const char* kCollapseHelp =
     "How bvh4/bvh8 are made from the binary tree: optimal (Ylitie et al. 2017), greedy (largest area first), or, for "

@@ -25,7 +25,7 @@ struct RenderOptions {
     std::string layout = "standard";     // bvh8 nodes: standard (floats) or compressed (8-bit planes)
     std::string tracer = "single";       // single (one path at a time) or stream (wavefront, sorted ray batches)
     uint32_t stream_paths = 1u << 18;    // stream: paths in flight per batch
-    std::string batch_traversal = "adaptive";  // stream: how batches are traced: single, packet, stream, adaptive
+    std::string batch_traversal = "packet";  // stream: how batches are traced: single, packet, stream, adaptive
     std::optional<uint64_t> memory_limit;    // bytes: lowers the memory bound below what the machine has free
 };
 
