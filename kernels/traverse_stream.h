@@ -179,7 +179,11 @@ inline BatchTraversal parse_batch_traversal(const std::string& name) {
 }
 
 inline const char* batch_traversal_name(BatchTraversal how) {
-    return how == BatchTraversal::Single ? "single" : how == BatchTraversal::Packet ? "packet" : "stream";
+    switch (how) {
+        case BatchTraversal::Single: return "single";
+        case BatchTraversal::Packet: return "packet";
+        default: return "stream";
+    }
 }
 
 // Closest hit (Query::Closest) or any hit (Query::Any) of every ray of `rays` into `hits` (same length), each
@@ -189,7 +193,8 @@ template <Query Q, bool Robust = true, class TriangleTest = WatertightRay, int N
                                       StreamScratch<N>& scratch, BatchTraversal how = BatchTraversal::Single,
                                       Counter&& counter = {}) {
     if (how == BatchTraversal::Single) return detail::trace_each<Q, Robust, TriangleTest>(bvh, rays, hits, counter);
-    if (how == BatchTraversal::Packet) return traverse_packets<Q, Robust, TriangleTest>(bvh, rays, hits, counter);
+    if (how == BatchTraversal::Packet)
+        return traverse_packets<Q, Robust, TriangleTest>(bvh, rays, hits, counter);
     for (size_t i = 0; i < rays.size(); ++i) {
         hits[i] = Hit{};
         hits[i].t = rays[i].tmax;

@@ -1,5 +1,5 @@
 #pragma once
-// The wavefront path tracer (`--tracer stream`): the frame's pixels in batches of FrameSettings::stream_paths
+// The wavefront path tracer (`--tracer stream`): the frame's pixels in batches of at most FrameSettings::stream_paths
 // paths, each batch on one thread; a batch's live paths advance one bounce at a time: their rays are sorted
 // (kernels/ray_order.h), traced as one batch through the tracer's batch query, shaded by the same shade_bounce as
 // the single-path tracer, and the paths still alive compacted for the next bounce. A path keeps its own random
@@ -37,6 +37,40 @@ inline uint64_t working_threads() {
                             tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
 }
 
+// How a frame's pixels are dealt into batches: square tiles of `side` pixels, tile k (in raster order) to batch k
+// mod `batches`, each tile's pixels row by row. Every batch holds the same mix of sky and geometry, so the threads
+// finish together, and a batch's camera rays reach the scene tile by tile, as the single-path tracer's do, so that
+// neighbouring rays find its nodes in cache (a row of spans across the whole image did not).
+struct BatchPlan {
+    uint64_t batches, side, width, height;
+
+    // At most `most` paths a batch, and at least kBatchesPerThread batches a thread (a frame of fewer paths than one
+    // batch would otherwise leave every other thread idle), as many as a multiple of the threads.
+    static constexpr uint64_t kBatchesPerThread = 2;
+    static constexpr uint64_t kSide = 16;  // a tile row is a packet's rays
+    static BatchPlan of(uint64_t width, uint64_t height, uint64_t most, uint64_t threads) {
+        most = std::max<uint64_t>(1, most), threads = std::max<uint64_t>(1, threads);
+        uint64_t side = kSide;
+        while (side > 1 && side * side > most) side /= 2;
+        const uint64_t tiles = (width + side - 1) / side * ((height + side - 1) / side);
+        const uint64_t per_batch = most / (side * side);
+        uint64_t batches = (tiles + per_batch - 1) / per_batch;
+        batches = std::max(batches, threads * kBatchesPerThread);
+        batches = (batches + threads - 1) / threads * threads;
+        return {std::max<uint64_t>(1, std::min(batches, tiles)), side, width, height};
+    }
+    // Calls f(pixel) for every pixel (y * width + x) of batch `b`.
+    template <class F>
+    void for_each_pixel(uint64_t b, F&& f) const {
+        const uint64_t tiles_x = (width + side - 1) / side, tiles = tiles_x * ((height + side - 1) / side);
+        for (uint64_t t = b; t < tiles; t += batches) {
+            const uint64_t x0 = t % tiles_x * side, y0 = t / tiles_x * side;
+            for (uint64_t y = y0; y < std::min(y0 + side, height); ++y)
+                for (uint64_t x = x0; x < std::min(x0 + side, width); ++x) f(uint32_t(y * width + x));
+        }
+    }
+};
+
 namespace detail {
 
 struct StreamPath {
@@ -55,6 +89,7 @@ struct Wavefront {
     std::vector<Ray> rays, sorted_rays;
     std::vector<Record> hits, sorted_hits;
     std::vector<uint32_t> keys, order, radix_scratch;
+    bool sorted = false;  // whether this bounce's rays are traced from sorted_rays into sorted_hits
     Scratch scratch;
 
     size_t bytes() const {
@@ -63,8 +98,17 @@ struct Wavefront {
                (keys.capacity() + order.capacity() + radix_scratch.capacity()) * sizeof(uint32_t) + scratch.bytes();
     }
 
-    // The first `live` rays in key order, into sorted_rays.
-    void sort(uint32_t live, const RayOrderKey& key) {
+    // The first `live` rays in key order, into sorted_rays. The key's cells divide the box of these rays' origins,
+    // not the scene's: a view of a small part of a large scene still sorts its rays into many cells. Rays from one
+    // point (a pinhole camera's) stay in pixel order: their runs of neighbouring pixels are coherent packets already,
+    // and a key of octant alone would only pay a full sort to pull the runs apart.
+    void sort(uint32_t live) {
+        BBox origins;
+        for (uint32_t i = 0; i < live; ++i)
+            if (std::isfinite(rays[i].org.x) && std::isfinite(rays[i].org.y) && std::isfinite(rays[i].org.z)) origins.extend(rays[i].org);
+        sorted = origins.lower != origins.upper;
+        if (!sorted) return;
+        const RayOrderKey key(origins);
         keys.resize(live);
         for (uint32_t i = 0; i < live; ++i) keys[i] = key(rays[i]);
         radix_order(keys, order, radix_scratch);
@@ -72,8 +116,17 @@ struct Wavefront {
         for (uint32_t i = 0; i < live; ++i) sorted_rays[i] = rays[order[i]];
     }
 
+    // The rays of this bounce in the order they are traced, and where their hits go.
+    std::span<const Ray> traced_rays(uint32_t live) const { return {(sorted ? sorted_rays : rays).data(), live}; }
+    std::span<Record> traced_hits(uint32_t live) {
+        std::vector<Record>& into = sorted ? sorted_hits : hits;
+        into.resize(live);
+        return {into.data(), live};
+    }
+
     // Each sorted ray's hit back to its path's place.
     void unsort(uint32_t live) {
+        if (!sorted) return;
         hits.resize(live);
         for (uint32_t i = 0; i < live; ++i) hits[order[i]] = sorted_hits[i];
     }
@@ -126,35 +179,25 @@ uint64_t render_frame_stream(const BatchTracer& tracer, const ShadingScene& scen
     using Record = typename detail::BatchRecord<BatchTracer>::type;
     using Wavefront = detail::Wavefront<typename BatchTracer::Scratch, Record>;
     const int w = scene.settings.width;
-    const uint64_t pixels = uint64_t(w) * uint64_t(scene.settings.height);
-    // Equal batches of at most stream_paths paths, as many as a multiple of the threads, so no thread idles while
-    // another traces a last batch alone.
-    const uint64_t threads = working_threads();
-    const uint64_t most = std::max<uint32_t>(1, scene.settings.stream_paths);
-    uint64_t batches = (pixels + most - 1) / most;
-    if (batches > 1) batches = (batches + threads - 1) / threads * threads;
-    const uint64_t batch = (pixels + batches - 1) / batches;
-    const RayOrderKey key(scene.flat.bounds);
+    const BatchPlan plan = BatchPlan::of(uint64_t(w), uint64_t(scene.settings.height), scene.settings.stream_paths,
+                                         working_threads());
     static tbb::enumerable_thread_specific<Wavefront> wavefronts;  // reused from frame to frame
     std::atomic<uint64_t> rays{0}, done{0}, sort_ns{0};
-    tbb::parallel_for(uint64_t(0), batches, [&](uint64_t b) {
+    tbb::parallel_for(uint64_t(0), plan.batches, uint64_t(1), [&](uint64_t b) {
         Wavefront& wf = wavefronts.local();
-        const uint64_t first = std::min(b * batch, pixels);
-        uint32_t live = uint32_t(std::min(batch, pixels - first));
-        wf.paths.resize(live);
-        wf.rays.resize(live);
-        for (uint32_t i = 0; i < live; ++i) {
-            const uint32_t pixel = uint32_t(first + i);
+        wf.paths.clear();
+        wf.rays.clear();
+        plan.for_each_pixel(b, [&](uint32_t pixel) {
             const int x = int(pixel % uint32_t(w)), y = int(pixel / uint32_t(w));
-            wf.paths[i] = {PathState{}, Rng(uint64_t(y) * uint64_t(w) + uint64_t(x), frame), pixel};
-            const float u = wf.paths[i].rng.next_float(), v = wf.paths[i].rng.next_float();
-            wf.rays[i] = camera.generate(x, y, u, v);
-        }
+            wf.paths.push_back({PathState{}, Rng(uint64_t(y) * uint64_t(w) + uint64_t(x), frame), pixel});
+            const float u = wf.paths.back().rng.next_float(), v = wf.paths.back().rng.next_float();
+            wf.rays.push_back(camera.generate(x, y, u, v));
+        });
+        uint32_t live = uint32_t(wf.paths.size());
         uint64_t traced = 0, sorting = 0;
         for (int depth = 0; live > 0; ++depth) {
-            sorting += detail::timed_ns([&] { wf.sort(live, key); });
-            wf.sorted_hits.resize(live);
-            tracer.closest(std::span<const Ray>(wf.sorted_rays.data(), live), std::span<Record>(wf.sorted_hits.data(), live), wf.scratch);
+            sorting += detail::timed_ns([&] { wf.sort(live); });
+            tracer.closest(wf.traced_rays(live), wf.traced_hits(live), wf.scratch);
             sorting += detail::timed_ns([&] { wf.unsort(live); });
             traced += live;
             uint32_t next_live = 0;
@@ -175,7 +218,7 @@ uint64_t render_frame_stream(const BatchTracer& tracer, const ShadingScene& scen
         }
         rays += traced;
         sort_ns += sorting;
-        if (on_batch) on_batch(float(done.fetch_add(1) + 1) / float(batches));
+        if (on_batch) on_batch(float(done.fetch_add(1) + 1) / float(plan.batches));
     });
     if (stats) {
         stats->sort_ns += sort_ns;

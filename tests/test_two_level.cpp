@@ -47,17 +47,17 @@ TEST_CASE("Embree's two-level rows shade instanced triangles as its flat row doe
         accel->prepare();
         accel->build();
     }
-    const auto render = [&](const Accelerator& accel, TracerKind tracer) {
+    const auto frame_of = [&](const Accelerator& accel, TracerKind tracer) {
         FrameSettings settings;
         settings.width = 96, settings.height = 72, settings.tracer = tracer, settings.stream_paths = 1000;
         const ShadingScene shading{flat, settings};
         Image image(settings.width, settings.height);
-        const uint64_t rays = accel.render(shading, PinholeCamera(scene_camera(scene, flat), settings.width, settings.height), 0, image);
+        const uint64_t rays = canopy::render(accel, shading, PinholeCamera(scene_camera(scene, flat), settings.width, settings.height), 0, image);
         return std::pair{rays, image.mean(1)};
     };
-    const auto [flat_rays, flat_mean] = render(*flat_embree, TracerKind::Single);
+    const auto [flat_rays, flat_mean] = frame_of(*flat_embree, TracerKind::Single);
     for (const TracerKind tracer : {TracerKind::Single, TracerKind::Stream}) {
-        const auto [rays, mean] = render(*two_level, tracer);
+        const auto [rays, mean] = frame_of(*two_level, tracer);
         INFO((tracer == TracerKind::Single ? "single" : "stream"));
         // Object-space rounding moves a few grazing hits: statistics, not bits.
         CHECK(double(rays) == Approx(double(flat_rays)).epsilon(0.002));
