@@ -104,7 +104,7 @@ bool has_split(const KdTree& tree, int axis, float position) {
 
 }  // namespace
 
-TEST_CASE("the kd-tree agrees with brute force on procedural scenes", "[kdtree][oracle]") {
+TEST_CASE("the kd-tree agrees with brute force on procedural scenes", "[kdtree][oracle][heavy]") {
     const std::string specs[] = {scaled_spec("box", 12000, 3), scaled_spec("cylinders", 12000, 4),
                                  scaled_spec("mirror", 12000, 7), scaled_spec("surface", 12000, 5),
                                  scaled_spec("triangles", 3000, 6)};
@@ -124,7 +124,7 @@ TEST_CASE("the kd-tree agrees with brute force at extreme scales and offsets", "
     }
 }
 
-TEST_CASE("the kd-tree agrees with brute force on shared scenes", "[kdtree][oracle][shared]") {
+TEST_CASE("the kd-tree agrees with brute force on shared scenes", "[kdtree][oracle][shared][heavy]") {
     for_each_shared_scene([](const FlatScene& flat, const char* name) {
         check_kd_against_oracle(flat.triangles, random_rays(flat.triangles, scaled(10000, 1000), 23), name);
     });

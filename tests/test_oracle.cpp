@@ -5,7 +5,7 @@
 using namespace canopy;
 using namespace canopy::test;
 
-TEST_CASE("builders and kernels agree with brute force on procedural scenes", "[oracle]") {
+TEST_CASE("builders and kernels agree with brute force on procedural scenes", "[oracle][heavy]") {
     const std::string specs[] = {scaled_spec("box", 12000, 3), scaled_spec("cylinders", 12000, 4),
                                  scaled_spec("mirror", 12000, 7), scaled_spec("surface", 12000, 5),
                                  scaled_spec("triangles", 3000, 6), scaled_spec("foliage", 6000, 8),
@@ -16,7 +16,7 @@ TEST_CASE("builders and kernels agree with brute force on procedural scenes", "[
     }
 }
 
-TEST_CASE("builders and kernels agree with brute force on shared scenes", "[oracle][shared]") {
+TEST_CASE("builders and kernels agree with brute force on shared scenes", "[oracle][shared][heavy]") {
     for_each_shared_scene([](const FlatScene& flat, const char* name) {
         check_against_oracle(flat.triangles, random_rays(flat.triangles, scaled(10000, 1000), 23), name);
     });
@@ -27,7 +27,7 @@ TEST_CASE("rays with bounded intervals agree with brute force", "[oracle]") {
     check_against_oracle(flat.triangles, bounded_interval_rays(flat, scaled(20000), 29), "box with tmin/tmax");
 }
 
-TEST_CASE("Möller–Trumbore kernels agree with brute-force Möller–Trumbore", "[oracle][fast]") {
+TEST_CASE("Möller–Trumbore kernels agree with brute-force Möller–Trumbore", "[oracle][fast][heavy]") {
     for (const std::string& spec : {scaled_spec("box", 12000, 3), scaled_spec("cylinders", 12000, 4)}) {
         const FlatScene flat = flatten(load_scene(spec));
         check_against_oracle<true, MollerTrumboreRay>(flat.triangles, off_surface(random_rays(flat.triangles, scaled(60000), 19)), spec);

@@ -111,7 +111,7 @@ TEST_CASE("a scene of triangles in one plane", "[pathological]") {
     check_every_builder(triangles_in_one_plane(kTriangles), "one plane");
 }
 
-TEST_CASE("a scene of zero-area triangles", "[pathological]") {
+TEST_CASE("a scene of zero-area triangles", "[pathological][heavy]") {
     check_every_builder(zero_area_triangles(kTriangles), "zero area");
 }
 
@@ -127,6 +127,6 @@ TEST_CASE("the same scene at 1e-30 and at 1e30", "[pathological]") {
     }
 }
 
-TEST_CASE("a scene of long, thin, parallel needles", "[pathological]") {
+TEST_CASE("a scene of long, thin, parallel needles", "[pathological][heavy]") {
     check_every_builder(parallel_needles(kTriangles), "needles");
 }

@@ -85,7 +85,7 @@ TEST_CASE("rays aimed exactly at shared edges and vertices of a plane never leak
     }
 }
 
-TEST_CASE("translated and scaled scenes agree with brute force", "[extreme]") {
+TEST_CASE("translated and scaled scenes agree with brute force", "[extreme][heavy]") {
     const FlatScene flat = flatten(load_scene("gen:box?tris=3000&seed=12"));
     for (const auto& [scale, offset] : {std::pair{1.0f, Vec3(1e5f, 1e5f, 1e5f)}, std::pair{1e-4f, Vec3(0)},
                                         std::pair{1e4f, Vec3(0)}, std::pair{1e-4f, Vec3(-1e5f, 0, 1e5f)}}) {

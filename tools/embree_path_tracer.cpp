@@ -83,17 +83,11 @@ private:
 RTCRayHit closest_hit(RTCScene scene, const Ray& ray) {
     RTCIntersectContext context;
     rtcInitIntersectContext(&context);
-    RTCRayHit rh;
-    rh.ray.org_x = ray.org.x, rh.ray.org_y = ray.org.y, rh.ray.org_z = ray.org.z;
-    rh.ray.dir_x = ray.dir.x, rh.ray.dir_y = ray.dir.y, rh.ray.dir_z = ray.dir.z;
-    rh.ray.tnear = 0.0f;
-    rh.ray.tfar = std::numeric_limits<float>::infinity();
-    rh.ray.time = 0.0f;
-    rh.ray.mask = 0xffffffffu;
-    rh.ray.id = 0;
-    rh.ray.flags = 0;
-    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-    rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+    // RTCRay's members in declaration order: origin, tnear, direction, time, tfar, mask, id, flags.
+    RTCRayHit rh{};
+    rh.ray = RTCRay{ray.org.x, ray.org.y, ray.org.z, 0.0f, ray.dir.x, ray.dir.y, ray.dir.z, 0.0f,
+                    std::numeric_limits<float>::infinity(), 0xffffffffu, 0, 0};
+    rh.hit.geomID = rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
     rtcIntersect1(scene, &context, &rh);
     return rh;
 }
