@@ -1,9 +1,5 @@
 #include "accel/memory_budget.h"
 
-#include "accel/builders/early_split_clipping.h"
-#include "accel/builders/presplit.h"
-#include "accel/builders/sbvh.h"
-#include "accel/builders/split_partitioning.h"
 #include "accel/bvh.h"
 #include "accel/kdtree.h"
 #include "accel/wide_bvh.h"
@@ -54,30 +50,11 @@ constexpr uint64_t kKdTreeBytesPerReference = sizeof(KdBlock) + sizeof(uint32_t)
 // placement into a bounded number of them) with their share of top-level nodes.
 constexpr uint64_t kPlacementBytes = 1024;
 
-// Builders whose reference count grows beyond the triangle count, and the most slots they allocate per triangle.
-struct ReferenceCap {
-    const char* builder;
-    double per_triangle;
-};
-const ReferenceCap kReferenceCaps[] = {
-    {"sbvh", SbvhSettings{}.max_references_per_triangle},
-    {"presplit", 1.0 + PresplitSettings{}.budget},
-    {"esc", kMaxEscReferencesPerTriangle},
-    {"streelet", 1.3},      // streelet.cpp: a 30% pre-split quota
-    {"bonsai-split", kMaxReferenceCapacity},
-    {"sweep-presplit", kMaxReferenceCapacity},
-    {kKdTreeName, KdSettings{}.max_references_per_triangle},
-};
-
-// The builders `--builder auto` chooses from (renderer/auto_builder.cpp): its estimate is the largest of theirs, plus
-// the largest layout again, as its calibration keeps the best tree so far while it builds the next.
-constexpr const char* kAutoCandidates[] = {"binned", "bonsai-split", "esc", "sbvh", "sweep", "bittner", "lbvh"};
-
 MemoryEstimate build_terms(const SceneSize& size, const BuildPlan& plan) {
     MemoryEstimate e;
     const uint64_t triangles = plan.two_level ? size.triangles : size.instanced_triangles;
-    const auto references = uint64_t(double(triangles) * reference_cap_per_triangle(plan.builder)) + 1;
-    if (plan.builder == kKdTreeName) {  // no PrimRefs, binary BVH or wide layout
+    const auto references = uint64_t(double(triangles) * reference_cap_per_triangle(spec_name(plan.builder))) + 1;
+    if (spec_name(plan.builder) == kKdTreeName) {  // no PrimRefs, binary BVH or wide layout
         e.references = references * kKdBuildBytesPerReference;
         e.layout = references * kKdTreeBytesPerReference;
         return e;
@@ -96,8 +73,11 @@ MemoryEstimate plan_terms(const SceneSize& size, const BuildPlan& plan) {
     if (plan.builder != "auto") return build_terms(size, plan);
     MemoryEstimate largest = build_terms(size, {"binned", plan.width, true});
     uint64_t kept = largest.layout;
-    for (const char* candidate : kAutoCandidates) {
-        const MemoryEstimate e = build_terms(size, {candidate, plan.width, false});
+    // auto's candidates (the builders with a prior): the largest of theirs, plus the largest layout again, as its
+    // calibration keeps the best tree so far while it builds the next.
+    for (const BuilderEntry& candidate : builders()) {
+        if (!candidate.auto_prior) continue;
+        const MemoryEstimate e = build_terms(size, {candidate.name, plan.width, false});
         if (e.total() > largest.total()) largest = e;
         kept = std::max(kept, e.layout);
     }
@@ -138,12 +118,6 @@ struct CgroupFiles {
 };
 
 }  // namespace
-
-double reference_cap_per_triangle(const std::string& builder) {
-    for (const ReferenceCap& cap : kReferenceCaps)
-        if (builder == cap.builder) return cap.per_triangle;
-    return 1.0;
-}
 
 MemoryEstimate estimate_memory(const SceneSize& size, std::span<const BuildPlan> plans) {
     MemoryEstimate total;

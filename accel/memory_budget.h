@@ -2,6 +2,8 @@
 // A build's peak memory, estimated before anything large is allocated, against the memory the process may use:
 // a scene too large for the machine is refused with an error that names both numbers, instead of the kernel
 // killing the process half-way through generating or building it.
+#include "accel/builder.h"
+
 #include <cstdint>
 #include <optional>
 #include <span>
@@ -20,7 +22,7 @@ struct SceneSize {
 
 // One accelerator to be built over the scene.
 struct BuildPlan {
-    std::string builder = "binned";  // a registered builder, "auto", or "embree"
+    std::string builder = "binned";  // a registered builder's spec, "auto", or "embree"
     int width = 8;                   // of the traversal layout: 2, 4 or 8
     bool two_level = false;          // a two-level or rebraided top level over object trees
 };
@@ -39,8 +41,7 @@ struct MemoryEstimate {
     std::string describe() const;  // "61.3 GiB (scene 17.9 GiB, flat 14.9 GiB, ...)"
 };
 
-// PrimRef slots a builder allocates per triangle at most (sbvh 2, presplit 1.5, ...); 1 for builders that do not split.
-double reference_cap_per_triangle(const std::string& builder);
+// reference_cap_per_triangle (accel/builder.h) gives the PrimRef slots each builder allocates per triangle.
 
 // The scene counted once; each plan's trees (binary BVH, layout) summed, as the bench keeps every row's accelerator
 // alive; the largest plan's PrimRefs and build scratch, as rows build one after another and free them.

@@ -103,17 +103,12 @@ SceneStatistics scene_statistics(const Scene& scene, const FlatScene& flat, doub
 
 namespace {
 
-// A candidate's prior: build time per triangle built, and frame time relative to binned SAH's as a function of the
-// scene's statistics. Fitted on the issue-28 validation run of 2026-12-04 (`canopy bench SCENE --builder
-// auto,binned,sweep,lbvh,sbvh,esc,bonsai-split,bittner --builds 3 --frames 10`, every shared scene but the zoos and
-// the procedural classes at their default sizes; 2 threads, bvh8, Zen 5), so the priors have seen those scenes:
-// they only order the calibration and predict the candidates it does not measure.
-struct Prior {
-    const char* builder;
-    const char* toplevel;
-    double build_ns_per_triangle;         // on scenes without slivers
-    double sliver_build_ns_per_triangle;  // where splitting builders split (gen:cylinders, gen:foliage)
-    double (*relative_frame)(const SceneStatistics&);
+// A candidate: a builder under a top level, with its prior (accel/builder.h's AutoPrior). The flat candidates are
+// the registered builders with a prior, which say where they were fitted.
+struct Candidate {
+    std::string builder;
+    std::string toplevel;
+    AutoPrior prior;
 };
 
 // Scenes whose triangle boxes are this much larger than the triangles are made of long diagonal slivers
@@ -144,19 +139,12 @@ bool crossing_slivers(const SceneStatistics& s) {
     return slivers(s) && s.reducible_cover > kCrossingCover * std::pow(double(s.unique_triangles), kCrossingCoverExponent);
 }
 
-double same_as_binned(const SceneStatistics&) { return 1.0; }
-// crytek-sponza 0.92; other architecture 1.00 to 1.15; scans 0.98 to 1.03; gen:cylinders 0.63 and 0.64, gen:foliage
-// 0.52 and 0.54.
-double bonsai_split_frame(const SceneStatistics& s) {
-    return crossing_slivers(s) ? 0.64 : slivers(s) ? 0.53 : dense_boxes(s) ? 0.92 : architecture(s) ? 1.07 : 1.01;
-}
-// The same tree as binned where its automatic SA_max does not split; gen:cylinders 0.40 and 0.42, gen:foliage 0.51
-// and 0.52.
-double esc_frame(const SceneStatistics& s) { return crossing_slivers(s) ? 0.41 : slivers(s) ? 0.51 : 1.0; }
-// crytek-sponza 0.87; other architecture 0.96 to 1.05; scans 0.98 to 1.01; gen:cylinders 0.72 and 0.75, gen:foliage
-// 0.47 and 0.48.
-double sbvh_frame(const SceneStatistics& s) {
-    return crossing_slivers(s) ? 0.73 : slivers(s) ? 0.47 : dense_boxes(s) ? 0.87 : 1.0;
+// A prior's frame relative to binned's on a scene of this class.
+double relative_frame(const AutoPrior& p, const SceneStatistics& s) {
+    if (p.instanced > 0.0 && instanced(s)) return p.instanced;
+    if (crossing_slivers(s)) return p.crossing_slivers;
+    if (slivers(s)) return p.clustered_slivers;
+    return dense_boxes(s) ? p.dense_boxes : architecture(s) ? p.architecture : p.other;
 }
 // Where binned's tree is measured, its sibling overlap o (accel/metrics.h) predicts sbvh's gain better than the class:
 // what object splits could not separate is what spatial splits may. sbvh / binned frames in the validation run of
@@ -168,49 +156,23 @@ double sbvh_frame(const SceneStatistics& s) {
 // Floored at crytek-sponza's gain, the largest fitted; sliver fields keep their class priors (gen:foliage's 0.47 at
 // o = 0.23 is no extrapolation of this line).
 constexpr double kSbvhOverlapOnset = 0.17, kSbvhOverlapGain = 3.8, kSbvhFrameFloor = 0.83;
-// Full sweeps instead of bins: 0.97 to 1.01 everywhere.
-double sweep_frame(const SceneStatistics&) { return 1.0; }
-// crytek-sponza 0.85; other architecture 0.94 to 0.99; scans 1.02 to 1.07; gen:cylinders 0.73 and 0.83, gen:foliage
-// 0.85 and 0.91.
-double bittner_frame(const SceneStatistics& s) {
-    return crossing_slivers(s) ? 0.78 : slivers(s) ? 0.88 : dense_boxes(s) ? 0.85 : architecture(s) ? 0.96 : 1.04;
-}
-// lbvh's default, the direct wide tree from the Morton codes (its optimal collapse: architecture 1.10 to 1.28, scans
-// 1.06 to 1.12, slivers 1.36 and 1.49, overlapping instances 1.25, zoo-64's flattened scans, whose Morton order
-// interleaves the instances' triangles). The direct tree against binned, commit 1da3c4a: objects seen from outside
-// 1.05 to 1.25, geometric mean 1.12 (bunny, armadillo, dragon, gen:surface and the four unseen models, 1024 x 768);
-// rooms and cities 1.27 to 1.67 (crytek-sponza 1.37, sibenik 1.30, conference 1.54, gen:box 1.27, gen:city 1.67),
-// slivers 1.50 and 1.73 (512 x 384, docs/results.md); instances the collapse's prior times the rooms' 1.1. The
-// cheapest build, so it wins where a frame is cheap against building.
-double lbvh_frame(const SceneStatistics& s) {
-    return instanced(s) ? 1.38 : slivers(s) ? 1.6 : architecture(s) ? 1.4 : 1.12;
-}
 // zoo-64, traversal against flat's: rebraid 1.28 and 1.32 (two runs of commit 99a5deb; 1.035 and 1.063 in runs of
 // 2026-12-04, before flat frames got faster: 181 to 183 ms against 227, rebraid's 234 to 240 against 241). Plain
-// two-level (1.34) builds in the same time and traces slower, so it is no candidate.
-double rebraid_frame(const SceneStatistics&) { return 1.3; }
+// two-level (1.34) builds in the same time and traces slower, so it is no candidate. Instanced objects: each unique
+// triangle is built once (zoo-64: 30 ms for 148 k unique triangles, 200 ns each, against flat binned's 734 ms; a
+// prior of 600 ns had scaled every flat build down 3x once rebraid was measured), scaled by rebraid's measured build
+// speed-up since (0.81).
+constexpr AutoPrior kRebraidPrior{160.0, 160.0, 1.3, 1.3, 1.3, 1.3, 1.3};
 
-// Builds, ns a triangle: binned 160 to 230, sweep 280 to 400, lbvh 90 to 130, sbvh 550 to 1660 (slivers 1550 to
-// 1950), esc as binned where it does not split (slivers 790 to 820), bonsai-split 190 to 350 (slivers 340 to 580),
-// bittner 2200 to 4700 (slivers 9600 to 12600). Since then binning (batched), node storage and the collapse got
-// faster: binned, esc, sbvh and rebraid's priors are scaled by their builds' measured speed-ups (same scenes and
-// trees, old and new binaries alternating: binned 0.73 to 0.79, esc 0.82 and 0.89 where it splits, sbvh 0.85 and
-// 0.99 on slivers, rebraid 0.81; sweep, lbvh and bonsai-split 0.97 to 1.0). sbvh's own builds got faster still (issue
-// 32): in the validation run of 2026-12-06 (commit 0302ee6) they took 2.6x to 6.5x binned's time on the shared scenes
-// and generators without slivers, geometric mean 3.9 (binned's prior times 3.9 is its prior here), where the older
-// prior said 6.5; the others' ratios to binned's were within 15% of their priors'.
-constexpr Prior kPriors[] = {
-    {"binned", "flat", 145.0, 145.0, &same_as_binned},
-    {"bonsai-split", "flat", 280.0, 450.0, &bonsai_split_frame},
-    {"esc", "flat", 160.0, 710.0, &esc_frame},
-    {"sbvh", "flat", 570.0, 1750.0, &sbvh_frame},
-    {"sweep", "flat", 330.0, 330.0, &sweep_frame},
-    {"bittner", "flat", 3300.0, 11000.0, &bittner_frame},
-    {"lbvh", "flat", 45.0, 45.0, &lbvh_frame},  // the direct tree: 0.37x to 0.61x the optimal collapse's build (1da3c4a)
-    // Instanced objects: each unique triangle is built once (zoo-64: 30 ms for 148 k unique triangles, 200 ns each,
-    // against flat binned's 734 ms; a prior of 600 ns had scaled every flat build down 3x once rebraid was measured).
-    {"binned", "rebraid", 160.0, 160.0, &rebraid_frame},
-};
+// The registered builders with a prior, flat, then binned under a re-braided top level.
+std::vector<Candidate> candidates() {
+    std::vector<Candidate> out;
+    for (const BuilderEntry& entry : builders())
+        if (entry.auto_prior) out.push_back({entry.name, "flat", *entry.auto_prior});
+    out.push_back({"binned", "rebraid", kRebraidPrior});
+    return out;
+}
+
 // Frame time per pixel with binned, 2 threads, bvh8: rooms seen from inside 1.4 to 2.6 us (crytek-sponza, sibenik,
 // conference); slivers crossing the scene 3.0 us (gen:cylinders), clustered ones 0.47 us (gen:foliage; at 3.0 us,
 // auto expected a one-frame foliage image to be all frame and built sbvh first, for 1.23x the best time to image).
@@ -233,10 +195,10 @@ double frame_ns_per_pixel(const SceneStatistics& s) {
 double prior_frame_ms(const SceneStatistics& s, uint64_t pixels, double relative) {
     return double(pixels) * frame_ns_per_pixel(s) * 1e-6 * relative;
 }
-bool allowed(const Prior& p, const SceneStatistics& stats) {
-    // Where its automatic SA_max splits nothing, esc builds binned's very tree: measuring it would be waste.
-    if (std::string(p.builder) == "esc" && stats.box_fill >= kEscMaxFillToSplit) return false;
-    const bool two_level = std::string(p.toplevel) != "flat";
+bool allowed(const Candidate& c, const SceneStatistics& stats) {
+    // A prior may stop at a box fill: from it up, esc's automatic SA_max splits nothing and esc builds binned's tree.
+    if (stats.box_fill >= c.prior.max_box_fill) return false;
+    const bool two_level = c.toplevel != "flat";
     if (two_level) return instanced(stats);  // two-level only with instances
     return flat_candidates(stats.triangles, stats.unique_triangles);
 }
@@ -284,13 +246,14 @@ double sbvh_frame_from_overlap(double overlap) {
 
 std::vector<CandidateEstimate> prior_estimates(const SceneStatistics& stats, int frames, uint64_t pixels) {
     std::vector<CandidateEstimate> out;
-    for (const Prior& p : kPriors) {
-        if (!allowed(p, stats)) continue;
-        const bool two_level = std::string(p.toplevel) != "flat";
+    for (const Candidate& candidate : candidates()) {
+        if (!allowed(candidate, stats)) continue;
+        const AutoPrior& p = candidate.prior;
+        const bool two_level = candidate.toplevel != "flat";
         const double built = double(two_level ? stats.unique_triangles : stats.triangles);
-        CandidateEstimate c{p.builder, p.toplevel};
+        CandidateEstimate c{candidate.builder, candidate.toplevel};
         c.build_ms = built * (slivers(stats) ? p.sliver_build_ns_per_triangle : p.build_ns_per_triangle) * 1e-6;
-        c.frame_ms = prior_frame_ms(stats, pixels, p.relative_frame(stats));
+        c.frame_ms = prior_frame_ms(stats, pixels, relative_frame(p, stats));
         out.push_back(c);
     }
     std::stable_sort(out.begin(), out.end(), [&](const CandidateEstimate& a, const CandidateEstimate& b) {

@@ -56,8 +56,7 @@ struct Entry {
     std::optional<TraversalCounts> visits;  // canopy: the first timed frame's rays through the counting kernel
     uint64_t counted_rays = 0;
     std::optional<float> rebraid_threshold;  // canopy's rebraid rows
-    std::optional<std::string> esc_sa_max;   // canopy's esc rows
-    std::optional<float> sbvh_alpha;         // canopy's sbvh rows
+    nlohmann::json builder_params;           // canopy's rows of a named builder: each parameter's value
 
     double build_min() const { return *std::min_element(build_ms.begin(), build_ms.end()); }
     double frame_mean() const { return mean(frame_ms); }
@@ -103,7 +102,7 @@ std::vector<Entry> rows_per_tracer(std::vector<Entry> accelerators, const BenchO
             for (const std::string& batch : tracer == TracerKind::Stream ? ways : std::vector<std::string>{""}) {
                 Entry row;
                 row.accel = a.accel;
-                row.rebraid_threshold = a.rebraid_threshold, row.esc_sa_max = a.esc_sa_max, row.sbvh_alpha = a.sbvh_alpha;
+                row.rebraid_threshold = a.rebraid_threshold, row.builder_params = a.builder_params;
                 row.tracer = tracer;
                 row.batch = ways.size() > 1 ? batch : "";
                 if (canopy && !batch.empty()) row.settings.batch_traversal = parse_batch_traversal(batch);
@@ -121,7 +120,7 @@ bool builds_its_accelerator(const std::vector<Entry>& entries, size_t i) {
 
 // --start applies to the optimisers in a bench; plain builders in the same run ignore it.
 std::string optimiser_start(const std::string& builder, const std::string& start) {
-    return is_bvh_builder(builder) && find_builder(builder).default_start ? start : "";
+    return is_bvh_builder(spec_name(builder)) && find_builder(spec_name(builder)).optimiser() ? start : "";
 }
 
 // "2 threads", "1 thread" or "all threads" (0).
@@ -135,12 +134,16 @@ std::vector<float> rebraid_thresholds_of(const std::string& toplevel, const Benc
     return toplevel == "rebraid" ? o.rebraid_thresholds : std::vector<float>{TwoLevelSettings{}.open_extent};
 }
 
-// The SA_max values of a builder's rows: esc's list, one (automatic) row for the others.
-std::vector<SaMax> sa_max_values_of(const std::string& builder, const BenchOptions& o) {
-    if (builder != "esc") return {SaMax{}};
-    std::vector<SaMax> values;
-    for (const std::string& text : o.esc_sa_max) values.push_back(parse_sa_max(text));
-    return values;
+// Every parameter of a BVH builder's spec with its value, the defaults included; {} for other families.
+nlohmann::json builder_params_json(const std::string& spec) {
+    const BuilderSpec parsed = parse_builder_spec(spec);
+    nlohmann::json params = nlohmann::json::object();
+    if (!is_bvh_builder(parsed.name)) return params;
+    for (const BuilderParam& p : find_builder(parsed.name).params) {
+        const std::string* value = parsed.params.find(p.key);
+        params[p.key] = value ? *value : p.default_value;
+    }
+    return params;
 }
 
 std::vector<Entry> make_entries(const Scene& scene, const FlatScene& flat, const BenchOptions& o, int threads) {
@@ -162,7 +165,7 @@ std::vector<Entry> make_entries(const Scene& scene, const FlatScene& flat, const
                             if (collapse == "direct" && (builder != "lbvh" || toplevel != "flat") && o.collapses.size() > 1) continue;
                             // Another structure family (the kd-tree) has one kernel: one row, not one per BVH kernel,
                             // traversal mode or collapse.
-                            const bool bvh = builder == "auto" || is_bvh_builder(builder);
+                            const bool bvh = builder == "auto" || is_bvh_builder(spec_name(builder));
                             if (!bvh && (kernel != o.kernels.front() || traversal != o.traversals.front() ||
                                          collapse != o.collapses.front() || layout != o.layouts.front()))
                                 continue;
@@ -171,15 +174,12 @@ std::vector<Entry> make_entries(const Scene& scene, const FlatScene& flat, const
                             if (!collapse.empty()) options.collapse = parse_collapse_method(collapse);
                             options.layout = parse_node_layout(layout);
                             if (builder != "auto") {
-                                for (const float threshold : rebraid_thresholds_of(toplevel, o))
-                                    for (const SaMax sa_max : sa_max_values_of(builder, o)) {
-                                        options.rebraid_threshold = threshold, options.esc_sa_max = sa_max;
-                                        if (builder == "sbvh") options.sbvh_alpha = o.sbvh_alpha;
-                                        entries.push_back({make_canopy_accelerator(scene, flat, options)});
-                                        if (toplevel == "rebraid") entries.back().rebraid_threshold = threshold;
-                                        if (builder == "esc") entries.back().esc_sa_max = sa_max_name(sa_max);
-                                        if (builder == "sbvh") entries.back().sbvh_alpha = o.sbvh_alpha;
-                                    }
+                                for (const float threshold : rebraid_thresholds_of(toplevel, o)) {
+                                    options.rebraid_threshold = threshold;
+                                    entries.push_back({make_canopy_accelerator(scene, flat, options)});
+                                    if (toplevel == "rebraid") entries.back().rebraid_threshold = threshold;
+                                    entries.back().builder_params = builder_params_json(builder);
+                                }
                                 continue;
                             }
                             if (toplevel != o.toplevels.front()) continue;  // auto chooses the top level itself
@@ -325,8 +325,7 @@ nlohmann::json results_json(const std::vector<Entry>& entries, uint64_t tris) {
                            {"tracer", tracer_name(e.tracer)},
                            {"threads", e.threads},
                            {"rebraid_threshold", or_null(e.rebraid_threshold)},
-                           {"esc_sa_max", or_null(e.esc_sa_max)},
-                           {"sbvh_alpha", or_null(e.sbvh_alpha)},
+                           {"builder_params", e.builder_params},
                            {"batch_traversal", e.tracer != TracerKind::Stream ? nlohmann::json(nullptr)
                                                : canopy ? nlohmann::json(batch_traversal_name(e.settings.batch_traversal))
                                                : nlohmann::json(e.settings.embree_packets ? "rtcIntersect16" : "rtcIntersect1M")},
@@ -606,7 +605,7 @@ nlohmann::json bench_scene(const BenchOptions& o, LoadedScene& loaded, SceneRepo
 
 // Row by row as make_entries makes them. Rows that differ only by traversal mode, intersector or collapse are
 // separate builds of the same size; auto has a row per planned frame count (under the first top level only, as it
-// chooses its own), rebraid one per opening threshold and esc one per SA_max.
+// chooses its own) and rebraid one per opening threshold.
 std::vector<BuildPlan> build_plans(const BenchOptions& o) {
     std::vector<BuildPlan> plans;
     const size_t copies = o.traversals.size() * o.intersectors.size() * o.collapses.size() * o.layouts.size();
@@ -616,7 +615,7 @@ std::vector<BuildPlan> build_plans(const BenchOptions& o) {
                 const bool auto_rows = builder == "auto";
                 if (auto_rows && toplevel != o.toplevels.front()) continue;
                 const size_t rows = copies * (auto_rows ? o.frames_planned.size()
-                                                        : rebraid_thresholds_of(toplevel, o).size() * sa_max_values_of(builder, o).size());
+                                                        : rebraid_thresholds_of(toplevel, o).size());
                 plans.insert(plans.end(), rows, {builder, kernel_width(kernel), !auto_rows && toplevel != "flat"});
             }
     const bool two_level = std::any_of(o.toplevels.begin(), o.toplevels.end(), [](const std::string& t) { return t != "flat"; });

@@ -13,13 +13,11 @@ namespace canopy {
 
 struct BenchOptions {
     std::string scene;  // the scene of run_bench(options); run_bench(scenes, options) sets it per scene
-    std::vector<std::string> builders{"binned"};
+    std::vector<std::string> builders{"binned"};  // specs with parameters: "sbvh:alpha=1e-5" (accel/builder.h)
     std::string start;  // start tree of the optimisers among the builders ("" for each one's default)
     std::vector<std::string> kernels{"auto"};
     std::vector<std::string> toplevels{"flat"};  // flat, two-level, rebraid
     std::vector<float> rebraid_thresholds{TwoLevelSettings().open_extent};  // a rebraid row each (sec. 4.2, Fig. 4)
-    std::vector<std::string> esc_sa_max{"auto"};  // builder esc: a row each (parse_sa_max: auto, 12.5, 8x)
-    float sbvh_alpha = kSbvhAlpha;                // builder sbvh's rows
     std::vector<std::string> blas_builders;  // object BVH builders of the two-level rows; empty: `builders`
     std::vector<std::string> traversals{"robust"};      // robust, fast
     std::vector<std::string> intersectors{"watertight"};  // watertight, moller

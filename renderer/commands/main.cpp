@@ -61,6 +61,26 @@ std::string shell_quoted(const std::string& text) {
     return quoted + "'";
 }
 
+// The flags from before builders took parameters, `--esc-sa-max 8x,auto` and `--sbvh-alpha 1e-5`: each plain
+// `builder` in the builder lists becomes one spec per value ("esc:sa_max=8x", a row each).
+void apply_param_alias(const std::string& flag, const std::string& builder, const std::string& key,
+                       const std::vector<std::string>& values, BenchOptions& b) {
+    bool used = false;
+    for (std::vector<std::string>* list : {&b.builders, &b.blas_builders}) {
+        std::vector<std::string> specs;
+        for (const std::string& spec : *list) {
+            if (spec != builder) {
+                specs.push_back(spec);
+                continue;
+            }
+            for (const std::string& value : values) specs.push_back(builder + ":" + key + "=" + value);
+            used = true;
+        }
+        *list = specs;
+    }
+    if (!used) throw std::invalid_argument(flag + ": only with --builder " + builder);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -121,14 +141,11 @@ int main(int argc, char** argv) {
     CLI::Option* rebraid_option = bench->add_option("--rebraid-threshold", b.rebraid_thresholds,
                       "Rebraid rows: open BRefs wider than this share of their segment's extent, 0 to 1 (sec. 4.2); a row each")
         ->delimiter(',')->check(CLI::Range(0.0, 1.0))->capture_default_str();
-    CLI::Option* sa_max_option = bench->add_option("--esc-sa-max", b.esc_sa_max,
-                      "esc rows: SA_max of early split clipping, a row each: auto, a box area (12.5) or a multiple of the "
-                      "median ideal triangle area (8x)")
-        ->delimiter(',')->capture_default_str();
-    CLI::Option* alpha_option = bench->add_option("--sbvh-alpha", b.sbvh_alpha,
-                      "sbvh rows: spatial splits only where object splits overlap by more than this share of the root's "
-                      "area (Stich et al. 2009 and the quality-metrics paper: 1e-5)")
-        ->check(CLI::NonNegativeNumber)->capture_default_str();
+    std::vector<std::string> esc_area_limits, sbvh_alpha_values;
+    CLI::Option* esc_option = bench->add_option("--esc-sa-max", esc_area_limits,
+                      "esc rows, a row each: --builder esc:sa_max=VALUE for each value")->delimiter(',');
+    CLI::Option* alpha_option = bench->add_option("--sbvh-alpha", sbvh_alpha_values,
+                      "sbvh rows, a row each: --builder sbvh:alpha=VALUE for each value")->delimiter(',');
     bench->add_option("--blas-builder", b.blas_builders,
                       "Two-level top levels: builders of the object BVHs, a row each (default: the --builder list)")
         ->delimiter(',');
@@ -247,11 +264,13 @@ int main(int argc, char** argv) {
             if (distributed::is_root()) run_accuracy(ac);  // not split: under a job, rank 0's alone
         } else if (*tradeoff) {
             tr.width = tradeoff_size[0], tr.height = tradeoff_size[1];
+            tr.builders = join_builder_specs(tr.builders);
             if (tradeoff_accels.empty()) tr.embree_qualities.clear();
             else if (tr.embree_qualities.empty()) tr.embree_qualities = {"medium"};
             run_tradeoff(tr);
         } else if (*study) {
             distributed::checked([&] {
+                st.builders = join_builder_specs(st.builders);
                 for (const std::string& b : st.builders) check_builder_name(b);  // unknown names fail before any work
             });
             st.width = study_size[0], st.height = study_size[1];
@@ -261,15 +280,14 @@ int main(int argc, char** argv) {
             if (!accels.empty()) b.embree_qualities = qualities;
             if (dynamic_option->count()) b.dynamic = dynamic;
             distributed::checked([&] {
-                for (const std::string& blas : b.blas_builders) check_blas_builder(blas, b.toplevels);
                 if (rebraid_option->count() && std::find(b.toplevels.begin(), b.toplevels.end(), "rebraid") == b.toplevels.end())
                     throw std::invalid_argument("--rebraid-threshold: only with --toplevel rebraid");
-                if (sa_max_option->count() && std::find(b.builders.begin(), b.builders.end(), "esc") == b.builders.end())
-                    throw std::invalid_argument("--esc-sa-max: only with --builder esc");
-                for (const std::string& value : b.esc_sa_max) parse_sa_max(value);
-                const auto builds_sbvh = [](const std::vector<std::string>& names) { return std::find(names.begin(), names.end(), "sbvh") != names.end(); };
-                if (alpha_option->count() && !builds_sbvh(b.builders) && !builds_sbvh(b.blas_builders))
-                    throw std::invalid_argument("--sbvh-alpha: only with --builder sbvh");
+                b.builders = join_builder_specs(b.builders), b.blas_builders = join_builder_specs(b.blas_builders);
+                if (esc_option->count()) apply_param_alias("--esc-sa-max", "esc", "sa_max", esc_area_limits, b);
+                if (alpha_option->count()) apply_param_alias("--sbvh-alpha", "sbvh", "alpha", sbvh_alpha_values, b);
+                for (const std::string& blas : b.blas_builders) check_blas_builder(blas, b.toplevels);
+                for (const std::string& builder : b.builders)
+                    if (builder != "auto") check_builder_name(builder);
             });
             run_bench(bench_scenes, b);
         }

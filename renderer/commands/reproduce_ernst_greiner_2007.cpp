@@ -93,12 +93,12 @@ std::vector<double> growth_targets(const Subject& s) {
 
 // The SA_max, in median ideal triangle areas ("x", accel/builder.h), whose early split clipping grows this
 // scene's references to `target` per triangle or just below: bisection on log2 of the multiple.
-std::string sa_max_for_growth(const FlatScene& flat, double target) {
+std::string limit_for_growth(const FlatScene& flat, double target) {
     const std::vector<PrimRef> refs = make_prim_refs(flat.triangles);
-    const float unit = resolve_sa_max(flat.triangles, refs, {SaMax::Unit::MedianIdealArea, 1.0f});
+    const float unit = resolve_esc_area(flat.triangles, refs, {SaMax::Unit::MedianIdealArea, 1.0f});
     const auto growth = [&](double log2_multiple) {
-        const double sa_max = double(unit) * std::exp2(log2_multiple);
-        return double(early_split_clip_count(flat.triangles, refs, float(sa_max))) / double(refs.size());
+        const double area_limit = double(unit) * std::exp2(log2_multiple);
+        return double(early_split_clip_count(flat.triangles, refs, float(area_limit))) / double(refs.size());
     };
     if (!std::isfinite(unit)) return "1x";  // most triangles degenerate: nothing to split at any multiple
     double lo = -8.0, hi = 24.0;  // growth(lo) is the most ESC cuts; growth(hi) about 1
@@ -132,11 +132,11 @@ constexpr Setting kSettings[] = {
      "paths of up to 8 bounces, Embree MEDIUM in the same run", 0, "bvh8", 8, 1024, 768, 256, 192, 5, 3, true},
 };
 
-BenchOptions bench_options(const Setting& setting, const std::vector<std::string>& sa_max, bool quick) {
+BenchOptions bench_options(const Setting& setting, const std::vector<std::string>& limits, bool quick) {
     BenchOptions o;
-    o.builders = {"binned", "esc", "kdtree"};
-    o.esc_sa_max = sa_max;
-    o.esc_sa_max.push_back("auto");
+    o.builders = {"binned"};
+    for (const std::string& limit : limits) o.builders.push_back(std::string("esc:") + kEscSaMaxKey + "=" + limit);
+    o.builders.insert(o.builders.end(), {"esc", "kdtree"});
     o.kernels = {setting.kernel};
     o.threads = {setting.threads};
     o.bounces = setting.bounces;
@@ -151,7 +151,7 @@ BenchOptions bench_options(const Setting& setting, const std::vector<std::string
 
 // One structure's figures from a bench row.
 struct Measured {
-    std::string label, sa_max;
+    std::string label, area_limit;
     double refs_per_tri, bytes, build_s, inner, triangles, frame_s;
     bool kd = false, embree = false;
 };
@@ -161,10 +161,11 @@ std::vector<Measured> measured_rows(const nlohmann::json& scene) {
     for (const nlohmann::json& r : scene.at("results")) {
         const bool embree = r.at("accel") == "embree";
         const std::string builder = embree ? "Embree " + r.at("quality").get<std::string>() : r.at("builder").get<std::string>();
-        const std::string sa_max = r.at("esc_sa_max").is_string() ? r.at("esc_sa_max").get<std::string>() : "";
+        const nlohmann::json& params = r.at("builder_params");
+        const std::string limit = params.contains(kEscSaMaxKey) ? params.at(kEscSaMaxKey).get<std::string>() : "";
         std::string label = builder == "binned" ? "bvh (binned SAH)" : builder == "kdtree" ? "kd-tree" : builder;
-        if (!sa_max.empty()) label = sa_max == "auto" ? "bvh ESC, automatic SA_max" : "bvh ESC, SA_max " + sa_max;
-        rows.push_back({label, sa_max, embree ? kNotMeasured : json_number(r, "refs_per_tri"), json_number(r, "bytes"),
+        if (!limit.empty()) label = limit == "auto" ? "bvh ESC, automatic SA_max" : "bvh ESC, SA_max " + limit;
+        rows.push_back({label, limit, embree ? kNotMeasured : json_number(r, "refs_per_tri"), json_number(r, "bytes"),
                         json_number(r, "build_ms_min") / 1e3, json_number(r, "inner_per_ray"), json_number(r, "triangles_per_ray"),
                         json_number(r, "frame_ms_mean") / 1e3, builder == "kdtree", embree});
     }
@@ -306,7 +307,7 @@ std::string changes(const std::vector<Subject>& subjects, const std::vector<Sett
                              " (kd-tree " + format("%.1f", kd_now->inner) + ")");
         double best_split = now[0].frame_s;
         for (const Measured& m : now)
-            if (!m.embree && (m.kd || !m.sa_max.empty())) best_split = std::min(best_split, m.frame_s);
+            if (!m.embree && (m.kd || !m.area_limit.empty())) best_split = std::min(best_split, m.frame_s);
         const double gain = now[0].frame_s / best_split;
         (gain >= 1.05 ? pays : does_not).push_back(name + " " + format("%.2fx", gain));
     }
@@ -319,7 +320,7 @@ std::string changes(const std::vector<Subject>& subjects, const std::vector<Sett
 }
 
 std::string document(const ReproduceOptions& o, const Provenance& where, const std::vector<Subject>& subjects,
-                     const std::vector<std::vector<std::string>>& sa_max, const std::vector<SettingResult>& results) {
+                     const std::vector<std::vector<std::string>>& area_limit, const std::vector<SettingResult>& results) {
     std::string md = "# Ernst and Greiner 2007, Table 1: early split clipping against a plain BVH and a kd-tree\n\n";
     md += provenance_text(where);
     if (o.quick) md += " This is a **quick** run: smaller stand-in scenes, smaller images, one build and one frame.";
@@ -340,7 +341,7 @@ std::string document(const ReproduceOptions& o, const Provenance& where, const s
         md += "## " + std::string(r.setting->title) + "\n\n" + r.setting->what + ".\n\n";
         for (size_t i = 0; i < subjects.size(); ++i) {
             md += "### " + subjects[i].label + "\n\n";
-            md += "SA_max of the matched rows: " + list_text(sa_max[i]) + ".\n\n";
+            md += "SA_max of the matched rows: " + list_text(area_limit[i]) + ".\n\n";
             md += scene_table(subjects[i], r.scenes[i], r.setting->embree) + "\n";
         }
     }
@@ -354,20 +355,20 @@ std::string document(const ReproduceOptions& o, const Provenance& where, const s
 void reproduce_ernst_greiner_2007(const ReproduceOptions& o) {
     const Provenance where = provenance(o.command);
     const std::vector<Subject> list = subjects(o);
-    std::vector<std::vector<std::string>> sa_max;  // per subject, the matched SA_max values
+    std::vector<std::vector<std::string>> area_limit;  // per subject, the matched SA_max values
     for (const Subject& s : list) {
         const FlatScene flat = flatten(load_scene(s.spec));
         if (flat.triangles.empty()) throw std::invalid_argument("scene '" + s.spec + "' has no triangles");
         std::vector<std::string> values;
-        for (const double target : growth_targets(s)) values.push_back(sa_max_for_growth(flat, target));
-        sa_max.push_back(values);
+        for (const double target : growth_targets(s)) values.push_back(limit_for_growth(flat, target));
+        area_limit.push_back(values);
     }
     std::vector<SettingResult> results;
     nlohmann::json raw = nlohmann::json::object();
     for (const Setting& setting : kSettings) {
         SettingResult result{&setting, {}};
         for (size_t i = 0; i < list.size(); ++i) {
-            const std::vector<nlohmann::json> scene = measure_bench({list[i].spec}, bench_options(setting, sa_max[i], o.quick));
+            const std::vector<nlohmann::json> scene = measure_bench({list[i].spec}, bench_options(setting, area_limit[i], o.quick));
             if (!distributed::is_root()) continue;
             result.scenes.push_back(measured_rows(scene.at(0)));
             raw[setting.key].push_back(scene.at(0));
@@ -375,7 +376,7 @@ void reproduce_ernst_greiner_2007(const ReproduceOptions& o) {
         results.push_back(std::move(result));
     }
     if (!distributed::is_root()) return;
-    write_paper(o.out_dir, "ernst-greiner-2007", document(o, where, list, sa_max, results), raw);
+    write_paper(o.out_dir, "ernst-greiner-2007", document(o, where, list, area_limit, results), raw);
 }
 
 }  // namespace canopy
