@@ -223,6 +223,8 @@ TEST_CASE("a builder registered from a test file is listed, takes its parameter 
     for (const char* kernel : {"bvh2", "auto"}) {
         const auto accel = make_canopy_accelerator(flat, {"toy:leaf=2", "", kernel});
         CHECK(accel->builder() == "toy:leaf=2");
+        accel->prepare();
+        accel->build();
         std::vector<Hit> hits;
         for (const Ray& ray : rays) hits.push_back(accel->trace(ray));
         CHECK(count_mismatches(rays, expected, hits, std::string("toy ") + kernel) == 0);
