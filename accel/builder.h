@@ -12,6 +12,8 @@
 
 namespace canopy {
 
+struct BuildPlan;  // accel/memory_budget.h
+
 struct BuildInput {
     std::span<const Triangle> triangles;  // split builders clip these; others only read refs
     std::vector<PrimRef> refs;            // one per triangle on entry; the builder may reorder or grow it
@@ -117,6 +119,8 @@ std::vector<std::string> join_builder_specs(const std::vector<std::string>& piec
 // PrimRef slots a builder or other family allocates per triangle at most (BuilderEntry::reference_cap); 1 for a
 // name registered nowhere ("auto", "embree").
 double reference_cap_per_triangle(const std::string& name);
+// The memory estimate's plan for a `--builder` spec: its reference cap, and for "auto" the candidates it builds.
+BuildPlan make_build_plan(const std::string& spec, int width, bool two_level);
 // "key=value (default ...): help" lines of a builder's parameters, for help texts.
 std::string builder_params_help(const BuilderEntry& entry);
 // Throws InputError-like std::invalid_argument listing the known names when `name` is unknown, or saying what

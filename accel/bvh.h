@@ -1,7 +1,7 @@
 #pragma once
 // The binary BVH that every builder produces. Leaves index into `refs`, a list of triangle ids in
 // which a triangle may appear more than once (split builders place pieces of it in several leaves).
-#include "accel/geometry.h"
+#include "base/geometry.h"
 
 #include <cstdint>
 #include <memory>
@@ -21,8 +21,9 @@ struct BvhNode {
 static_assert(sizeof(BvhNode) == 32);
 
 // Allocates node arrays without initialising them: builders write every node they resize to, so value-initialising
-// them first (empty boxes, zero counts) is a wasted pass over the array (on crytek-sponza's LBVH, 2.8 ms beside a
-// 6 ms sort). BvhNode is an aggregate, an implicit-lifetime type, so the allocated bytes are its objects as they are.
+// them first (empty boxes, zero counts) is a wasted pass over the array, a fast build's sizeable share
+// (docs/results.md#builds-and-layouts). BvhNode is an aggregate, an implicit-lifetime type, so the allocated bytes
+// are its objects as they are.
 template <class T>
 struct UninitializedAllocator : std::allocator<T> {
     static_assert(std::is_trivially_destructible_v<T> && std::is_trivially_copyable_v<T>);

@@ -3,8 +3,8 @@
 // pages, because incoherent rays touch nodes all over the tree and 4 KiB pages make every visit a
 // likely TLB miss. Small arrays use the ordinary heap. The advice only takes where the heap hands out pages not
 // yet touched: reused heap memory stays in 4 KiB pages (crytek-sponza's leaves did). A fresh mapping per array
-// got every page huge but traced no faster (bvh8 / Embree 1.158 to 1.174 against 1.165 to 1.171) and built
-// slower (LBVH 17 to 23 ms against 14.4: the kernel zeroes each fresh page), so the heap stays.
+// got every page huge but traced no faster and built slower, as the kernel zeroes each fresh page, so the heap
+// stays (docs/results.md#builds-and-layouts).
 #include <sys/mman.h>
 
 #include <cstddef>

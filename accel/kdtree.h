@@ -3,10 +3,10 @@
 // O(N log N)": events sorted once and swept and spliced in linear time per node (its O(N log N) algorithm), "perfect
 // splits" (every straddling triangle clipped exactly to each child's voxel, so its candidate planes come from the
 // clipped bounds), the SAH with the empty-space bonus lambda(p), and termination by cost and depth. Subtrees are
-// built in parallel. A second structure family beside the BVH: renderer/kd_accel.cpp traces it. Leaves are stored
+// built in parallel. A second structure family beside the BVH: engine/kd_accelerator.cpp traces it. Leaves are stored
 // as the wide BVHs store theirs, in SIMD triangle blocks (accel/wide_bvh.h), so the kernel tests them with the same
 // block tests.
-#include "accel/geometry.h"
+#include "base/geometry.h"
 #include "accel/wide_bvh.h"
 
 #include <cstdint>
@@ -51,11 +51,9 @@ struct KdNode {
 static_assert(sizeof(KdNode) == 8);
 
 // A leaf's triangles, a lane each in order, in blocks of the lanes the wide BVH kernels test at once on this build
-// (block_lanes); the last block's spare lanes hold TriangleBlock's padding (prim kNone, never hit). Against one
-// triangle at a time, 8-lane blocks traced gen:cylinders (300k) 4.5x faster and stanford-bunny 1.1x, crytek-sponza
-// within noise, for 2.3x the memory on the last two, whose leaves hold 1 to 2 triangles on average. 4-lane blocks
-// took 0.6x the 8-lane memory but traced cylinders 1.23x slower (bunny and sponza within noise; one batch on a
-// loaded machine).
+// (block_lanes); the last block's spare lanes hold TriangleBlock's padding (prim kNone, never hit). Blocks pay where
+// leaves hold many triangles (long slivers) and cost memory where they hold one or two; 8 lanes take more memory than
+// 4 but traced slivers faster (docs/results.md#kd-leaves-as-simd-blocks, docs/results.md#builds-and-layouts).
 constexpr int kKdLanes = block_lanes(8);
 using KdBlock = TriangleBlock<kKdLanes>;
 

@@ -1,5 +1,6 @@
 #include "accel/memory_budget.h"
 
+#include "accel/builder.h"  // BuildSettings's leaf size: the header alone, not the registry
 #include "accel/bvh.h"
 #include "accel/kdtree.h"
 #include "accel/wide_bvh.h"
@@ -9,6 +10,7 @@
 #include <fstream>
 #include <initializer_list>
 #include <sstream>
+#include <string_view>
 #include <utility>
 
 namespace canopy {
@@ -20,24 +22,40 @@ constexpr uint64_t kGrowthSlack = 2;
 constexpr uint64_t kVertexBytes = sizeof(Vec3);
 constexpr uint64_t kMeshTriangleBytes = sizeof(glm::uvec3) + sizeof(uint32_t);  // indices and material
 constexpr uint64_t kFlatTriangleBytes = sizeof(Triangle) + sizeof(uint32_t);    // world triangle and material
-// A PrimRef array and the builders' second array of the same size (partition buffers, sorted copies, clustering).
+// A PrimRef array and the builders' second array of the same size (partition buffers, sorted copies, clustering,
+// or the parallel builders' node slots and their compacted copy).
 constexpr uint64_t kReferenceBytes = 2 * sizeof(PrimRef);
-// At most 2n - 1 nodes for n leaf references, and the references themselves.
-constexpr uint64_t kBinaryBytesPerReference = 2 * sizeof(BvhNode) + sizeof(uint32_t);
-// A wide node per N / 2 references at most (every inner node of the binary tree is a wide node only when the
-// collapse opens nothing, then every wide node holds at least 2 children); leaves: a LeafTriangle each for
-// bvh2, and for the SIMD widths up to half the lanes of a triangle block left empty.
-constexpr uint64_t wide_node_bytes_per_reference(int width) {
+// The SAH charges a leaf by the blocks of lanes it fills (BuildSettings::leaf_block), so with block leaves a leaf
+// below the size cap costs no more than a one-triangle leaf and leaves fill up: three quarters of the cap on average
+// (docs/results.md, "Memory estimate"). Binary leaves for the scalar kernel are charged per triangle and stay small.
+constexpr double kBlockLeafFill = 0.75;
+constexpr double kScalarLeafTriangles = 2.0;
+double references_per_leaf(int width) {
+    return width > 2 ? kBlockLeafFill * double(BuildSettings{}.max_leaf_size) : kScalarLeafTriangles;
+}
+// 2 l - 1 nodes for l leaves, and the references themselves.
+double binary_bytes_per_reference(int width) {
+    return 2.0 * double(sizeof(BvhNode)) / references_per_leaf(width) + double(sizeof(uint32_t));
+}
+// Leaves: a triangle block per leaf (a leaf never exceeds the cap, which is one block), a LeafTriangle per reference
+// for bvh2. Wide nodes: the collapse opens binary nodes until a wide node has N children, at least N / 2 of them
+// leaves on average (the leaves sit in the tree's last levels), so a wide node per N / 2 leaves at most.
+double layout_bytes_per_reference(int width) {
+    const double leaves_per_reference = 1.0 / references_per_leaf(width);
+    const auto node_bytes = [&](double node_size) { return node_size * leaves_per_reference / (width / 2.0); };
     switch (width) {
-        case 2: return sizeof(WideNode<2>);
-        case 4: return sizeof(WideNode<4>) / 2;
-        default: return sizeof(WideNode<8>) / 4;
+        case 2: return double(sizeof(LeafTriangle)) + node_bytes(sizeof(WideNode<2>));
+        case 4: return double(sizeof(LeafOf<4>)) * leaves_per_reference + node_bytes(sizeof(WideNode<4>));
+        default: return double(sizeof(LeafOf<8>)) * leaves_per_reference + node_bytes(sizeof(WideNode<8>));
     }
 }
-constexpr uint64_t leaf_bytes_per_reference(int width) {
-    if (width == 2) return sizeof(LeafTriangle);
-    return 2 * sizeof(LeafOf<8>) / uint64_t(block_lanes(8));
-}
+// Embree's row (renderer/embree_accel.cpp) copies the flat triangles into its own vertex and index buffers, and
+// Embree's MEDIUM build holds a PrimRef array beside its growing BVH8 of four-triangle leaves: the tree's bytes per
+// triangle are what peak resident memory showed over the copy and the PrimRefs (/usr/bin/time -v on the bench with
+// and without its Embree row; docs/results.md, "Memory estimate").
+constexpr uint64_t kEmbreeCopyBytes = sizeof(Triangle) + 3 * sizeof(uint32_t);
+constexpr uint64_t kEmbreeTreeBytes = 72;
+constexpr uint64_t kEmbreeBuildBytes = sizeof(PrimRef);
 // The kd-tree's build (accel/kdtree.cpp) per reference: six 12-byte events in a node's list, in the copy kept
 // for a child and in the child's merged list; the clipped box and triangle index in the node and in a child; the
 // index maps and side flag of the partition.
@@ -50,22 +68,35 @@ constexpr uint64_t kKdTreeBytesPerReference = sizeof(KdBlock) + sizeof(uint32_t)
 // placement into a bounded number of them) with their share of top-level nodes.
 constexpr uint64_t kPlacementBytes = 1024;
 
+// The builder's name without its parameters ("sbvh" for "sbvh:alpha=1e-5").
+std::string_view builder_name(const BuildPlan& plan) {
+    return std::string_view(plan.builder).substr(0, plan.builder.find(':'));
+}
+
 MemoryEstimate build_terms(const SceneSize& size, const BuildPlan& plan) {
     MemoryEstimate e;
     const uint64_t triangles = plan.two_level ? size.triangles : size.instanced_triangles;
-    const auto references = uint64_t(double(triangles) * reference_cap_per_triangle(spec_name(plan.builder))) + 1;
-    if (spec_name(plan.builder) == kKdTreeName) {  // no PrimRefs, binary BVH or wide layout
+    const auto references = uint64_t(double(triangles) * plan.reference_cap) + 1;
+    if (plan.builder == "embree") {
+        e.flat = triangles * kEmbreeCopyBytes;
+        e.references = triangles * kEmbreeBuildBytes;
+        e.layout = triangles * kEmbreeTreeBytes;
+        return e;
+    }
+    if (builder_name(plan) == kKdTreeName) {  // no PrimRefs, binary BVH or wide layout
         e.references = references * kKdBuildBytesPerReference;
         e.layout = references * kKdTreeBytesPerReference;
         return e;
     }
+    // PrimRefs and build scratch are freed before the collapse writes the layout: only what exceeds it adds to the peak.
     e.references = references * kReferenceBytes;
-    e.binary = references * kBinaryBytesPerReference;
-    e.layout = references * (wide_node_bytes_per_reference(plan.width) + leaf_bytes_per_reference(plan.width));
+    e.binary = uint64_t(double(references) * binary_bytes_per_reference(plan.width));
+    e.layout = uint64_t(double(references) * layout_bytes_per_reference(plan.width));
     if (plan.two_level) {
         e.flat = size.triangles * sizeof(Triangle);  // object-space copies of every object's triangles
         e.layout += size.instances * kPlacementBytes;
     }
+    e.references = e.references > e.layout ? e.references - e.layout : 0;
     return e;
 }
 
@@ -73,11 +104,10 @@ MemoryEstimate plan_terms(const SceneSize& size, const BuildPlan& plan) {
     if (plan.builder != "auto") return build_terms(size, plan);
     MemoryEstimate largest = build_terms(size, {"binned", plan.width, true});
     uint64_t kept = largest.layout;
-    // auto's candidates (the builders with a prior): the largest of theirs, plus the largest layout again, as its
-    // calibration keeps the best tree so far while it builds the next.
-    for (const BuilderEntry& candidate : builders()) {
-        if (!candidate.auto_prior) continue;
-        const MemoryEstimate e = build_terms(size, {candidate.name, plan.width, false});
+    // The largest of its candidates' builds, plus the largest layout again, as its calibration keeps the best tree
+    // so far while it builds the next.
+    for (const BuildPlan& candidate : plan.auto_candidates) {
+        const MemoryEstimate e = build_terms(size, candidate);
         if (e.total() > largest.total()) largest = e;
         kept = std::max(kept, e.layout);
     }
@@ -105,19 +135,19 @@ std::optional<uint64_t> number_in_file(const std::string& path) {
     return value;
 }
 
-uint64_t resident_bytes() {
-    std::ifstream in("/proc/self/statm");
-    uint64_t size = 0, resident = 0;
-    in >> size >> resident;
-    return resident * 4096;
-}
-
 struct CgroupFiles {
     const char* limit;
     const char* usage;
 };
 
 }  // namespace
+
+uint64_t resident_bytes() {
+    std::ifstream in("/proc/self/statm");
+    uint64_t size = 0, resident = 0;
+    in >> size >> resident;
+    return resident * 4096;
+}
 
 MemoryEstimate estimate_memory(const SceneSize& size, std::span<const BuildPlan> plans) {
     MemoryEstimate total;
@@ -146,9 +176,10 @@ std::string format_bytes(uint64_t bytes) {
 
 // The terms a build has (a kd-tree has no binary BVH): "61.3 GiB (scene 17.9 GiB, flat triangles 14.9 GiB, ...)".
 std::string MemoryEstimate::describe() const {
-    const std::pair<const char*, uint64_t> terms[] = {{"scene", scene}, {"flat triangles", flat},
+    const std::pair<const char*, uint64_t> terms[] = {{"process", process}, {"scene", scene}, {"flat triangles", flat},
                                                       {"references and build scratch", references},
-                                                      {"binary BVH", binary}, {"traversal layout", layout}};
+                                                      {"binary BVH", binary}, {"traversal layout", layout},
+                                                      {"images and batches", frames}};
     std::string parts;
     for (const auto& [name, bytes] : terms)
         if (bytes) parts += (parts.empty() ? "" : ", ") + std::string(name) + " " + format_bytes(bytes);

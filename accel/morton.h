@@ -1,7 +1,7 @@
 #pragma once
 // Morton order of references (Lauterbach et al. 2009): 63-bit codes of the centroids within their bounds,
 // sorted by a parallel, stable radix sort. Shared by the builders that start from a space-filling curve.
-#include "accel/geometry.h"
+#include "base/geometry.h"
 
 #include <cstdint>
 #include <vector>

@@ -98,9 +98,8 @@ struct BinMapping {
 };
 
 // Bins for a node of n references: 4 + n / 20, at most max_bins (Embree's object binning uses the same count).
-// Small nodes, most of a tree's, then set up, sweep and merge a few bins instead of one per reference: binned bvh8
-// builds of crytek-sponza took 1.13x Embree MEDIUM's time (2 threads) against 1.32x with up to a bin a reference,
-// sibenik 1.12x against 1.22x, conference 1.09x against 1.23x, for SAH within 1% and the same frames.
+// Small nodes, most of a tree's, then set up, sweep and merge a few bins instead of one per reference, which makes
+// builds markedly faster for the same SAH and frames (docs/results.md#builds-and-layouts).
 inline uint32_t object_bin_count(uint32_t max_bins, uint32_t n) { return std::min(max_bins, 4u + n / 20); }
 
 struct BinGrid {
@@ -160,7 +159,7 @@ void bin_batches(const PrimRef* refs, size_t begin, size_t end, const BinMapping
 
 // Bins refs [begin, begin + count) by centroid on all three axes in one pass. Refs go in batches: a batch's bins are
 // all computed before any is updated, so that its refs' loads do not wait behind stores to bins whose addresses come
-// late (binning crytek-sponza in chunks of 4096 refs took 5.3 ns a ref instead of 8.6 with a batch of 16; 6.8 with 8).
+// late; batches of 16 binned fastest (docs/results.md#builds-and-layouts).
 // Even and odd refs go to two grids, merged at the end: neighbouring refs often share a bin, and with one grid each
 // would wait for the previous one's store to that bin to be forwarded.
 inline BinGrid bin_refs(const PrimRef* refs, uint32_t begin, uint32_t count, const BinMapping& mapping) {
@@ -208,9 +207,9 @@ inline void require_power_of_two_block(const BuildSettings& settings) {
 }
 
 // The SAH sweep over the bin planes of every axis; a side's cost is its area times its triangle tests. The three
-// axes' sweeps go side by side, three independent chains of box unions instead of one after another (on crytek-sponza
-// the sweeps took 9.5 M cycles of a one-thread build instead of 12.0 M). Only the winner's boxes and counts are
-// gathered, after the sweep; ties go to the lower axis, then the lower plane.
+// axes' sweeps go side by side, three independent chains of box unions instead of one after another, so that their
+// latencies overlap (docs/results.md#builds-and-layouts). Only the winner's boxes and counts are gathered, after the
+// sweep; ties go to the lower axis, then the lower plane.
 inline Split best_split(const BinGrid& grid, uint32_t n, const BuildSettings& settings) {
     const LeafTests tests(settings);
     float right_cost[3][kMaxBins];  // right_cost[a][i]: bins [i, n) of axis a, negative when they are empty

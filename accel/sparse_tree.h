@@ -26,8 +26,9 @@ public:
     // build_left(first) and build_right(first), which put the child's descendants from slot `first` on and return how
     // far past `first` they reach. With `work` at least `grain` the two run concurrently, each in the range reserved for
     // the left child's `left_size` refs or the rest; otherwise one after the other, the right child's descendants packed
-    // after the left's, so that a serial subtree's nodes are dense and finish() reads them in order (crytek-sponza's
-    // binned build: compaction 0.7 ms instead of 2.1). Returns how far past `descendants` this node's descendants reach.
+    // after the left's, so that a serial subtree's nodes are dense and finish() reads them in order, which makes the
+    // compaction several times faster (docs/results.md#builds-and-layouts). Returns how far past `descendants` this
+    // node's descendants reach.
     template <class Left, class Right>
     uint32_t set_inner(uint32_t node, const BBox& bounds, uint32_t descendants, uint32_t left_size, size_t work,
                        size_t grain, Left&& build_left, Right&& build_right) {

@@ -1,7 +1,7 @@
 #include "accel/two_level.h"
 
 #include "accel/parallel.h"
-#include "accel/sparse_tree.h"
+#include "accel/top_down_builder.h"
 
 #include <glm/gtc/matrix_inverse.hpp>
 
@@ -179,31 +179,94 @@ struct Segment {
     uint32_t begin, end, extra_end;  // BRefs in [begin, end), free slots for opening in [end, extra_end) (sec. 5.2)
 };
 
+// The top level's search, for TopDownBuilder: a segment of BRefs is opened (re-braiding) before it is decided on,
+// becomes a leaf when it holds one BRef or a few triangles that the SAH keeps together, and is otherwise always
+// split, by a sweep or by binned SAH over the BRefs' centroids weighted by their triangle estimates.
 template <int N>
-class TopLevelBuilder {
+class TopLevelSearch {
 public:
-    TopLevelBuilder(const TwoLevelBvh<N>& bvh, const std::vector<TwoLevelInstance>& instances, const TwoLevelSettings& s)
-        : bvh_(bvh), instances_(instances), settings_(s), brefs_(bref_capacity(bvh.objects, instances, s)), nodes_(brefs_.size()) {}
+    struct Node {
+        Segment s;
+        bool open;    // whether this segment may still open BRefs (sec. 4.4: stopping holds for its whole subtree)
+        BBox bounds;  // filled in by prepare
+    };
+    struct Split {
+        bool by_sweep;
+        int axis;
+        uint32_t position;  // by sweep: BRefs on the left; binned: BRefs in bins [0, position) go left
+        BBox centroids;     // binned: the segment's centroid bounds, which the bins divide
+        float cost;
+        bool found() const { return axis >= 0; }
+    };
+    using Children = std::pair<Node, Node>;
+
+    TopLevelSearch(const TwoLevelBvh<N>& bvh, const std::vector<TwoLevelInstance>& instances, const TwoLevelSettings& s)
+        : bvh_(bvh), instances_(instances), settings_(s), brefs_(bref_capacity(bvh.objects, instances, s)) {}
 
     Bvh build() {
         for (uint32_t i = 0; i < instances_.size(); ++i) {
             const ObjectTree& object = bvh_.objects[instances_[i].object];
             brefs_[i] = placed_ref(i, object.root, 0, object.bounds, float(object.triangles));
         }
-        const Segment all{0, uint32_t(instances_.size()), uint32_t(brefs_.size())};
-        build_segment(all, 0, 1, settings_.top == TopLevel::Rebraid, 0);
+        const Node all{{0, uint32_t(instances_.size()), uint32_t(brefs_.size())}, settings_.top == TopLevel::Rebraid, BBox{}};
+        // Leaves of several BRefs only where leaf_without_search says so: max_leaf 1 turns the SAH's leaf test off.
+        const TopDownLimits limits{1, kMedianFallbackDepth, 64};
+        TopDownBuilder<TopLevelSearch> builder(*this, settings_.blas, limits, brefs_.size());
         Bvh top;
-        top.nodes = nodes_.finish();
+        top.nodes = builder.build(all);
         return top;
     }
 
     const std::vector<BRef>& brefs() const { return brefs_; }
 
+    void prepare(Node& node) {
+        if (node.open) node.open = worth_opening(node.s);
+        if (node.open) node.s.end = open_wide_brefs(node.s);
+        node.bounds = bounds_of(node.s);
+    }
+    static uint32_t count(const Node& node) { return node.s.end - node.s.begin; }
+    static uint32_t first(const Node& node) { return node.s.begin; }
+    static uint32_t slots(const Node& node) { return node.s.extra_end - node.s.begin; }
+    static BBox box(const Node& node) { return node.bounds; }
+    static float half_area(const Node& node) { return node.bounds.half_area(); }
+    bool leaf_without_search(const Node& node) const { return triangle_leaf(node.s, node.bounds); }
+
+    // Sec. 4.3: binned SAH over BRef centroids, each bin weighted by its BRefs' estimated triangle counts; a
+    // handful of BRefs are swept instead.
+    Split find(const Node& node) const {
+        if (count(node) > kSweepUpTo) return binned_split(node.s);
+        const Sweep best = sweep(node.s, [](uint32_t, float prims) { return prims; });
+        return {true, best.axis, best.split, BBox{}, best.cost};
+    }
+
+    std::optional<Children> split(const Node& node, const Split& chosen) {
+        const Segment& s = node.s;
+        if (chosen.by_sweep) {
+            std::sort(brefs_.begin() + s.begin, brefs_.begin() + s.end,
+                      [&](const BRef& a, const BRef& b) { return ordered(a, b, chosen.axis); });
+            return share_free_space(node, s.begin + chosen.position);
+        }
+        const Binning bin(chosen.centroids, chosen.axis, int(settings_.bins));
+        BRef* mid = std::partition(brefs_.data() + s.begin, brefs_.data() + s.end,
+                                   [&](const BRef& r) { return bin(r) < int(chosen.position); });
+        return share_free_space(node, uint32_t(mid - brefs_.data()));
+    }
+
+    // All centroids in one point (or too deep): split in the middle of the largest axis's order.
+    Children median(const Node& node) {
+        const Segment& s = node.s;
+        const int axis = centroid_bounds(s).largest_axis();
+        const uint32_t mid = s.begin + (s.end - s.begin) / 2;
+        std::nth_element(brefs_.begin() + s.begin, brefs_.begin() + mid, brefs_.begin() + s.end,
+                         [&](const BRef& a, const BRef& b) { return ordered(a, b, axis); });
+        return share_free_space(node, mid);
+    }
+
 private:
     // A BRef of node (child, count) of an instance's object tree, whose object box is `box`. Sec. 5.4: a
     // transformed node's world box is conservative, its object box transformed. Re-braiding looks into the object
     // tree anyway, so for an inner node it takes the union of its children's transformed boxes, which is tighter:
-    // fewer rays enter an instance only to miss it (zoo-64: 13% fewer entries per ray). The same boxes' areas
+    // fewer rays enter an instance only to miss it (docs/results.md#builds-and-layouts). The same boxes' areas
     // decide whether opening it is worth the entries (fewer_entries).
     BRef placed_ref(uint32_t instance, uint32_t child, uint32_t count, const BBox& box, float prims) const {
         BRef r{placed_box(instance, box), instance, child, count, prims};
@@ -226,20 +289,6 @@ private:
         return bvh_.instances[instance].identity ? box : transform_bounds(instances_[instance].to_world, box);
     }
 
-    // Returns how far past `descendants` its descendants reach (SparseTree::set_inner).
-    uint32_t build_segment(Segment s, uint32_t node, uint32_t descendants, bool open, uint32_t depth) {
-        if (open) open = worth_opening(s);
-        if (open) s.end = open_wide_brefs(s);
-        const BBox bounds = bounds_of(s);
-        if (s.end - s.begin == 1 || triangle_leaf(s, bounds)) return nodes_.set_leaf(node, bounds, s.begin, s.end - s.begin);
-        const uint32_t mid = partition(s, depth);
-        const auto [left, right] = share_free_space(s, mid);
-        return nodes_.set_inner(
-            node, bounds, descendants, left.extra_end - left.begin, s.end - s.begin, 64,
-            [&, left = left](uint32_t first) { return build_segment(left, descendants, first, open, depth + 1); },
-            [&, right = right](uint32_t first) { return build_segment(right, descendants + 1, first, open, depth + 1); });
-    }
-
     // Sec. 4.4: no opening once a segment holds one instance only, or at most 4 BRefs that barely overlap (no
     // pair whose common box has a tenth of the smaller one's area). Stopping holds for the whole subtree.
     bool worth_opening(const Segment& s) const {
@@ -259,8 +308,8 @@ private:
 
     // Sec. 4.2 and 5.3: every openable BRef wider than open_extent of the segment's largest extent is replaced by
     // its children: the first in its slot, the others appended while the segment's free space lasts. The widest
-    // go first (sec. 7 suggests prioritising by size): with the space of sec. 5.2, taking them in array order left
-    // crytek-sponza at 1.07x flat, widest first at 1.00x.
+    // go first (sec. 7 suggests prioritising by size): with the space of sec. 5.2, array order left crytek-sponza
+    // slower than its flat tree and widest first did not (docs/results.md#builds-and-layouts).
     uint32_t open_wide_brefs(const Segment& s) {
         if (s.extra_end == s.end) return s.end;  // no space (only a node of one child would fit: not worth a sort)
         const BBox bounds = bounds_of(s);
@@ -343,16 +392,18 @@ private:
         return b;
     }
 
-    // Sec. 4.3: binned SAH over BRef centroids, each bin weighted by its BRefs' estimated triangle counts.
-    // Returns the first BRef of the right side.
-    uint32_t partition(const Segment& s, uint32_t depth) {
-        if (s.end - s.begin <= kSweepUpTo && depth < kMedianFallbackDepth) return sweep_partition(s);
+    BBox centroid_bounds(const Segment& s) const {
         BBox centroids;
         for (uint32_t i = s.begin; i < s.end; ++i) centroids.extend(brefs_[i].bounds.center());
+        return centroids;
+    }
+
+    // The binned SAH's best plane on any axis, the bins weighted by their BRefs' triangle estimates.
+    Split binned_split(const Segment& s) const {
+        const BBox centroids = centroid_bounds(s);
         const int bins = int(settings_.bins);
-        int best_axis = -1, best_bin = 0;
-        float best_cost = INFINITY;
-        for (int axis = 0; axis < 3 && depth < kMedianFallbackDepth; ++axis) {
+        Split best{false, -1, 0, centroids, INFINITY};
+        for (int axis = 0; axis < 3; ++axis) {
             if (!(centroids.extent()[axis] > 0.0f)) continue;
             const Binning bin(centroids, axis, bins);
             std::array<BBox, kMaxTopLevelBins> box;
@@ -373,15 +424,11 @@ private:
             for (int b = 1; b < bins; ++b) {
                 grow(left, box[size_t(b - 1)]), left_weight += weight[size_t(b - 1)];
                 const float cost = left.half_area() * left_weight + right_cost[size_t(b)];
-                if (left_weight > 0.0f && right_cost[size_t(b)] > 0.0f && cost < best_cost)
-                    best_cost = cost, best_axis = axis, best_bin = b;
+                if (left_weight > 0.0f && right_cost[size_t(b)] > 0.0f && cost < best.cost)
+                    best.cost = cost, best.axis = axis, best.position = uint32_t(b);
             }
         }
-        if (best_axis < 0) return median_split(s, centroids);
-        const Binning bin(centroids, best_axis, bins);
-        BRef* mid = std::partition(brefs_.data() + s.begin, brefs_.data() + s.end,
-                                   [&](const BRef& r) { return bin(r) < best_bin; });
-        return uint32_t(mid - brefs_.data());
+        return best;
     }
 
     // A BRef's bin along one axis of the segment's centroid box.
@@ -393,15 +440,9 @@ private:
         int operator()(const BRef& r) const { return std::clamp(int((r.bounds.center()[axis] - lower) * scale), 0, bins - 1); }
     };
 
-    // The same SAH over every split of the centroid order on each axis: exact, and for a handful of BRefs cheaper
-    // than filling the bins. Ties in the order go by instance and node, so the split is the same on every run.
-    uint32_t sweep_partition(const Segment& s) {
-        const Sweep best = sweep(s, [](uint32_t, float prims) { return prims; });
-        std::sort(brefs_.begin() + s.begin, brefs_.begin() + s.end,
-                  [&](const BRef& a, const BRef& b) { return ordered(a, b, best.axis); });
-        return s.begin + best.split;
-    }
-
+    // The sweep is the same SAH over every split of the centroid order on each axis: exact, and for a handful of
+    // BRefs cheaper than filling the bins. Ties in the order go by instance and node, so the split is the same on
+    // every run.
     struct Sweep {
         int axis = 0;
         uint32_t split = 1;  // BRefs on the left
@@ -458,18 +499,10 @@ private:
         return a.child != b.child ? a.child < b.child : a.count != b.count ? a.count < b.count : a.triangle < b.triangle;
     }
 
-    // All centroids in one point (or too deep): split in the middle of the largest axis's order.
-    uint32_t median_split(const Segment& s, const BBox& centroids) {
-        const int axis = centroids.largest_axis();
-        const uint32_t mid = s.begin + (s.end - s.begin) / 2;
-        std::nth_element(brefs_.begin() + s.begin, brefs_.begin() + mid, brefs_.begin() + s.end,
-                         [&](const BRef& a, const BRef& b) { return ordered(a, b, axis); });
-        return mid;
-    }
-
     // Sec. 5.2: the free space goes to the children in proportion to their openable BRefs (to their sizes when
     // neither has any); the right side moves up to make room for the left's share.
-    std::pair<Segment, Segment> share_free_space(const Segment& s, uint32_t mid) {
+    Children share_free_space(const Node& node, uint32_t mid) {
+        const Segment& s = node.s;
         uint64_t open_left = 0, open_right = 0;
         for (uint32_t i = s.begin; i < mid; ++i) open_left += brefs_[i].openable();
         for (uint32_t i = mid; i < s.end; ++i) open_right += brefs_[i].openable();
@@ -477,7 +510,8 @@ private:
         const uint32_t free = s.extra_end - s.end;
         const uint32_t left_free = uint32_t(uint64_t(free) * open_left / (open_left + open_right));
         if (left_free) std::move_backward(brefs_.begin() + mid, brefs_.begin() + s.end, brefs_.begin() + s.end + left_free);
-        return {Segment{s.begin, mid, mid + left_free}, Segment{mid + left_free, s.end + left_free, s.extra_end}};
+        return {Node{{s.begin, mid, mid + left_free}, node.open, BBox{}},
+                Node{{mid + left_free, s.end + left_free, s.extra_end}, node.open, BBox{}}};
     }
 
     const TwoLevelBvh<N>& bvh_;
@@ -486,7 +520,6 @@ private:
     // A top-level leaf of triangles is one block of the SIMD kernels, or as large as an object's leaf may be.
     const uint32_t leaf_limit_ = std::min<uint32_t>(settings_.blas.max_leaf_size, N > 2 ? uint32_t(block_lanes(N)) : kSweepUpTo);
     std::vector<BRef> brefs_;
-    SparseTree nodes_;
 };
 
 uint32_t one_entry_per_leaf(int, uint32_t) { return 1; }
@@ -606,15 +639,15 @@ void build_top_level(TwoLevelBvh<N>& bvh, const std::vector<TwoLevelInstance>& i
     if (settings.bins < 2 || settings.bins > kMaxTopLevelBins)
         throw std::invalid_argument("top-level bins must be 2 to " + std::to_string(kMaxTopLevelBins) + ", not " +
                                     std::to_string(settings.bins));
-    TopLevelBuilder<N> builder(bvh, instances, settings);
-    const Bvh top = builder.build();
+    TopLevelSearch<N> search(bvh, instances, settings);
+    const Bvh top = search.build();
     bvh.bounds = top.nodes[0].bounds;
     // At the world origin: the frame of the object trees the world ray reaches directly (build_two_level).
     bvh.pool.frame = PlaneFrame::at(Vec3(0.0f), bvh.bounds);
     WideNodes<N> nodes;
     uint32_t entries = 0;
     const std::vector<LeafRun> runs = collapse_nodes<N>(top, nodes, bvh.pool.frame, &one_entry_per_leaf, entries, settings.collapse);
-    pool_top_level(bvh, nodes, runs, builder.brefs());
+    pool_top_level(bvh, nodes, runs, search.brefs());
 }
 
 template <int N>

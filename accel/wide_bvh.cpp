@@ -98,9 +98,9 @@ public:
     }
 
 private:
-    // Test costs of canopy's bvh8 kernel, relative: one 8-lane block test against one node test. Frames hardly
-    // moved with the block's cost from 0.5 to 1.5 (crytek-sponza bvh8 / Embree MEDIUM 1.000, 1.007, 1.004, 1.000 at
-    // 0.5, 0.75, 1, 1.5); at 1 sbvh and conference traced fastest of 1, 1.5 and 2.
+    // Test costs of canopy's bvh8 kernel, relative: one 8-lane block test against one node test. Frames hardly move
+    // with the block's cost between half and one and a half node tests, and equal costs traced fastest on the trees
+    // where they differed (docs/results.md#builds-and-layouts).
     static constexpr float kNodeTest = 1.0f;
     static constexpr float kBlockTest = 1.0f;
     static constexpr size_t kParallelNodes = 16 * 1024;  // smaller trees are planned on one thread
@@ -159,11 +159,10 @@ private:
 
     // S(n, k) for every k at once, and the left child's share that reaches each: lane j stands for k = j + 1, and
     // for each share i, lane j of the shifted costs is C(right, k - i), +inf where k - i < 1, so one vector add makes
-    // every k's sum (one k at a time, the sums were scalar chains of dependent minima: lbvh's crytek-sponza bvh8
-    // build, whose plan covers 524 k binary nodes, took 23.5 ms on 2 threads and 39.5 on 1, now 22.1 and 37.7, the
-    // same tree). The shifts are register permutes: unaligned loads from a freshly written array waited for their
-    // stores each time. Shares are tried in increasing order and a later one wins only when strictly cheaper, as one
-    // k at a time, so the choices are the scalar ones.
+    // every k's sum (one k at a time, the sums were scalar chains of dependent minima, a slower plan of the same tree:
+    // docs/results.md#builds-and-layouts). The shifts are register permutes: unaligned loads from a freshly written
+    // array waited for their stores each time. Shares are tried in increasing order and a later one wins only when
+    // strictly cheaper, as one k at a time, so the choices are the scalar ones.
     static Costs split_costs(const Costs& left, const Costs& right, std::array<uint8_t, N + 1>& split) {
         static_assert(N <= 8, "one 8-lane vector holds every k");
         constexpr float inf = std::numeric_limits<float>::infinity();
@@ -216,13 +215,13 @@ private:
 // second writes the top levels and then replays those subtrees concurrently, each from its own cursor, without
 // opening binary nodes again.
 //
-// The children of each wide node come from a CollapsePlan (the optimal method) or greedily (WideChildren). With
-// shared blocks, an inner child is written as one leaf of its subtree's triangles, in depth-first order, where the
-// plan chose that, or greedily where its subtree is at most a block's lanes of one-triangle leaves: its wide node
-// would hold only those leaves, and a ray that reaches it pays a node test for the box tests the block test makes
-// anyway (on crytek-sponza's LBVH, 81% of the greedy BVH8 nodes). The first pass finds such a subtree's refs by a
-// walk (or, for an LBVH, from its subtrees' ref ranges), and keeps them for the second, which reads them in order
-// and fetches their triangles ahead.
+// The children of each wide node come from a CollapsePlan (the optimal method) or greedily (WideChildren). With shared
+// blocks, an inner child is written as one leaf of its subtree's triangles, in depth-first order, where the plan chose
+// that, or greedily where its subtree is at most a block's lanes of one-triangle leaves: its wide node would hold only
+// those leaves, and a ray that reaches it pays a node test for the box tests the block test makes anyway (most of an
+// LBVH's greedy BVH8 nodes: docs/results.md#builds-and-layouts). The first pass finds such a subtree's refs by a walk
+// (or, for an LBVH, from its subtrees' ref ranges), and keeps them for the second, which reads them in order and
+// fetches their triangles ahead.
 template <int N, class LeafSink>
 class Collapser {
     static constexpr uint32_t kLanes = uint32_t(block_lanes(N));
@@ -426,8 +425,8 @@ private:
         std::vector<uint32_t> slots{self};
         for (size_t r = 0; r < records.size(); ++r) {
             // Fetch ahead what write_node reads at random: binary children two records on, and the leaf
-            // contents (every triangle, not only each leaf's first: binned bvh8 collapses of crytek-sponza took
-            // 6.2 ms instead of 8.1 on one thread) of the next record, whose children are in cache by now.
+            // contents (every triangle, not only each leaf's first, which measured faster:
+            // docs/results.md#builds-and-layouts) of the next record, whose children are in cache by now.
             if (r + 2 < records.size())
                 for (int i = 0; i < records[r + 2].count; ++i) __builtin_prefetch(&bvh_.nodes[records[r + 2].node[i]]);
             if (r + 1 < records.size())

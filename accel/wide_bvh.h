@@ -112,9 +112,8 @@ struct alignas(4 * W) TriangleBlock {
 static_assert(sizeof(TriangleBlock<4>) == 160 && sizeof(TriangleBlock<8>) == 320);
 
 // Lanes of the leaf intersector: binary nodes test one LeafTriangle at a time with the scalar intersector;
-// BVH4 and BVH8 test 8 triangles at once with AVX where the build has it, else 4 with SSE. On a quiet machine
-// 8-lane blocks traced 3 to 4% faster than 4-lane ones with both widths on crytek-sponza, sibenik, conference and
-// stanford-bunny (bvh8 / Embree MEDIUM 1.345 against 1.390 on sponza), for 16% more memory (16.6 against 14.3 MB).
+// BVH4 and BVH8 test 8 triangles at once with AVX where the build has it, else 4 with SSE: 8-lane blocks traced
+// faster than 4-lane ones with both widths, for somewhat more memory (docs/results.md#builds-and-layouts).
 constexpr int block_lanes(int width) {
 #if defined(__AVX2__)
     return width > 2 ? 8 : 1;
@@ -189,9 +188,8 @@ struct LeafRun {
 // The node half of collapse, for trees whose leaves hold something else than triangles (the two-level top
 // level): writes `nodes`, their planes in `frame`; a binary leaf of n refs takes entries(N, n) leaf entries,
 // `total_entries` in all. Returns the leaves in emission order, for the caller to fill. The optimal method
-// charges each leaf as a block test over its box, a stand-in for whatever lies below it: on crytek-sponza's
-// re-braided top level it cut a ray's inner node visits from greedy's 16.1 to 14.1, its cache lines from 82.8 to
-// 74.8.
+// charges each leaf as a block test over its box, a stand-in for whatever lies below it: on a re-braided top level
+// it cut a ray's inner node visits and cache lines against greedy's (docs/results.md#builds-and-layouts).
 template <int N>
 std::vector<LeafRun> collapse_nodes(const Bvh& bvh, WideNodes<N>& nodes, const PlaneFrame& frame,
                                     uint32_t (*entries)(int, uint32_t), uint32_t& total_entries, CollapseMethod method);

@@ -5,7 +5,7 @@
 
 #include "accel/builder.h"
 #include "kernels/dispatch.h"
-#include "renderer/accelerator.h"
+#include "engine/accelerator.h"
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>

@@ -3,6 +3,7 @@
 // read paths), and a load that must end in a scene or a clear refusal. InputError (bad input) and MemoryError
 // (too large for the bound) are the expected outcomes; any other exception escapes, aborts, and is a finding,
 // as is every crash, leak, hang and sanitizer report.
+#include "accel/memory_budget.h"
 #include "scenes/loaders.h"
 
 #include <cstdint>

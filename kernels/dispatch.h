@@ -1,10 +1,14 @@
 #pragma once
-// Kernel choice at run time: which widths this build compiled (they need their instruction sets at compile
-// time) and which the CPU runs. The default is the widest kernel available on both counts.
+// Kernel choice at run time, in one place: which widths this build compiled (they need their instruction sets at
+// compile time) and which the CPU runs, and the table that binds a built layout and the traversal's modes to the
+// compiled kernel (with_kernel). The default width is the widest available on both counts.
+#include "accel/two_level.h"
 #include "accel/wide_bvh.h"
+#include "kernels/kernel.h"
 
 #include <stdexcept>
 #include <string>
+#include <variant>
 #include <vector>
 
 namespace canopy {
@@ -67,5 +71,58 @@ inline int kernel_width(const std::string& name) {
 }
 
 inline std::string kernel_name(int width) { return "bvh" + std::to_string(width); }
+
+// Every traversal layout a BVH accelerator builds.
+using AnyLayout = std::variant<WideBvh<2>, WideBvh<4>, WideBvh<8>, CompressedWideBvh<8>, TwoLevelBvh<2>, TwoLevelBvh<4>,
+                               TwoLevelBvh<8>>;
+
+// The traversal's run-time choices, each a compile-time argument of the kernel.
+struct KernelModes {
+    bool robust = true;      // robust traversal (Ize 2013); false is the fast mode
+    bool watertight = true;  // watertight intersection (Woop et al. 2013); false: Moller-Trumbore
+};
+
+template <class... Layouts>
+using BvhKernelsOf = std::variant<std::monostate, BvhKernel<Layouts, true, WatertightRay>...,
+                                  BvhKernel<Layouts, true, MollerTrumboreRay>..., BvhKernel<Layouts, false, WatertightRay>...,
+                                  BvhKernel<Layouts, false, MollerTrumboreRay>..., KdKernel<WatertightRay>,
+                                  KdKernel<MollerTrumboreRay>>;
+// A built tree bound to its kernel; monostate for an accelerator whose queries go through another library.
+using AnyKernel = BvhKernelsOf<WideBvh<2>, WideBvh<4>, WideBvh<8>, CompressedWideBvh<8>, TwoLevelBvh<2>, TwoLevelBvh<4>,
+                               TwoLevelBvh<8>>;
+
+template <class Kernel>
+constexpr bool is_compiled_kernel = true;
+template <class Layout, bool Robust, class Test>
+constexpr bool is_compiled_kernel<BvhKernel<Layout, Robust, Test>> = kernel_compiled(Layout::kWidth);
+
+// The kernel of `layout` in `modes`: each combination is its own compiled kernel.
+inline AnyKernel make_kernel(const AnyLayout& layout, KernelModes modes) {
+    return std::visit([&]<class Layout>(const Layout& bvh) -> AnyKernel {
+        using W = WatertightRay;
+        using M = MollerTrumboreRay;
+        if (modes.robust) return modes.watertight ? AnyKernel(BvhKernel<Layout, true, W>{bvh}) : AnyKernel(BvhKernel<Layout, true, M>{bvh});
+        return modes.watertight ? AnyKernel(BvhKernel<Layout, false, W>{bvh}) : AnyKernel(BvhKernel<Layout, false, M>{bvh});
+    }, layout);
+}
+inline AnyKernel make_kernel(const KdTree& tree, KernelModes modes) {
+    return modes.watertight ? AnyKernel(KdKernel<WatertightRay>{tree}) : AnyKernel(KdKernel<MollerTrumboreRay>{tree});
+}
+
+// Calls f(kernel) with the kernel's own type: the one dispatch every frame or batch pays. Widths this build did not
+// compile never get here (kernel_width rejects them); `none` answers an accelerator without a kernel of canopy's.
+template <class F, class None>
+decltype(auto) with_kernel(const AnyKernel& kernel, F&& f, None&& none) {
+    using Result = decltype(none());
+    return std::visit([&]<class Kernel>(const Kernel& k) -> Result {
+        if constexpr (std::is_same_v<Kernel, std::monostate>) {
+            return none();
+        } else if constexpr (is_compiled_kernel<Kernel>) {
+            return f(k);
+        } else {
+            return none();
+        }
+    }, kernel);
+}
 
 }  // namespace canopy

@@ -3,7 +3,7 @@
 // Morton code of the origin in the scene's box, so that rays traced one after another start near each other and
 // head the same way (the sort keys of ray-stream tracers, e.g. Pharr et al. 1997's and Garanzha and Loop 2010's
 // origin and direction cells, reduced to what one radix pass per 10 bits can sort).
-#include "accel/geometry.h"
+#include "base/geometry.h"
 #include "kernels/ray.h"
 
 #include <algorithm>

@@ -98,10 +98,9 @@ struct Simd<8> {
     static F max_bits(F a, F b) { return _mm256_castsi256_ps(_mm256_max_epi32(bits(a), bits(b))); }
     static F min_bits(F a, F b) { return _mm256_castsi256_ps(_mm256_min_epi32(bits(a), bits(b))); }
     // With AVX-512 the comparison writes a mask register, read in one move, where AVX2 needs a movemask and a NOT:
-    // two instructions off every node's critical path. crytek-sponza bvh8 frames 1.097x Embree MEDIUM's before,
-    // 1.063x after (means of four alternating runs); bvh4's within noise, so Simd<4> keeps AVX2's. The triangle
-    // tests' comparisons stay vectors: as mask registers GCC chains them into masked comparisons, one after
-    // another, which measured slower.
+    // two instructions off every node's critical path, which made bvh8 frames faster and left bvh4's within noise,
+    // so Simd<4> keeps AVX2's (docs/results.md#traversal-kernels). The triangle tests' comparisons stay vectors: as
+    // mask registers GCC chains them into masked comparisons, one after another, which measured slower.
     static uint32_t le_mask_bits(F a, F b) {
 #if defined(__AVX512VL__)
         return _mm256_cmple_epi32_mask(bits(a), bits(b));

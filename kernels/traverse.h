@@ -22,7 +22,8 @@
 namespace canopy {
 
 // Robust mode's padding of the slab distances, relative to R |inv_dir| (see SlabRay): 8 u, u = 2^-24, twice the
-// rounding bound it covers. 16 u traced the accuracy sphere at offset 1e7 in 546 ns a ray, 8 u in 257.
+// rounding bound it covers; twice that again made rays far from the origin much slower
+// (docs/results.md#traversal-kernels).
 constexpr float kRobustPad = 0x1p-21f;
 
 // The smallest direction component the slab test divides by; smaller ones, zeros included, count as this with
@@ -47,7 +48,7 @@ struct NoCount {
 
 // Counts nothing, but keeps the leaf entry of the nearest hit, which the traversal has just read: a renderer
 // that shades the hit reads its corners from there, in cache, rather than from the scene's triangle array, a
-// cache miss on every hit (5 to 9% of a single-ray frame of the protocol scenes). The corners are the scene
+// cache miss on every hit (docs/results.md#headline-binned-and-sbvh-against-embree). The corners are the scene
 // triangle's, bit for bit. Only for flat trees: a two-level tree's leaves hold triangles in their objects' space.
 template <int N>
 struct NearestCorners : NoCount {
@@ -120,9 +121,8 @@ struct SlabRay {
     // In SSE lanes x, y, z: one division for the three reciprocals, no branches but one never taken. A frame's ray
     // waits on the hit before it, so this setup's latency is paid on every bounce: everything that does not need
     // the reciprocals (the planes' offsets from the direction's signs, the padded origin) is computed beside the
-    // division, and the unusable axes' fix-up (see above) leaves the path behind a branch: binned bvh8 frames
-    // 0.919x and 0.929x Embree MEDIUM's before on conference, 0.905x and 0.906x after; sibenik 0.950x and 0.954x,
-    // 0.940x and 0.931x (alternating runs, docs/results.md).
+    // division, and the unusable axes' fix-up (see above) leaves the path behind a branch
+    // (docs/results.md#a-rays-set-up-and-the-stacks-prefetches).
     [[gnu::always_inline]] SlabRay(const Ray& ray, const PlaneFrame& frame, bool robust) {
         const __m128 sign = _mm_set1_ps(-0.0f);
         const __m128 dir = _mm_setr_ps(ray.dir.x, ray.dir.y, ray.dir.z, 1.0f);
@@ -184,14 +184,13 @@ struct SlabLanes {
     }
 };
 
-// A slab distance's bits as a signed integer. Slab distances are compared by these (Embree's trick): integer max
-// and min take one cycle where the float ones take four, and they sit on every node's critical path (load, slab
-// distances, interval, mask, child, next node): crytek-sponza bvh8 frames 1.17x to 1.18x Embree MEDIUM's
-// before, 1.12x to 1.13x after. Integer order is float order for +0 up to +inf; a negative float (-0 too) reads
-// as a negative integer, below all of those. The near distances meet tmin >= +0 (kernel_tmin), so their maximum
-// is the float maximum; the far ones meet tmax, and their minimum is the float minimum unless one of them is
-// negative, when it reads negative and the box, behind the origin, is culled. The one NaN a SlabRay leaves, an
-// empty slot's, is x86's default NaN, negative: as a far distance it culls that slot.
+// A slab distance's bits as a signed integer. Slab distances are compared by these (Embree's trick): integer max and
+// min take one cycle where the float ones take four, and they sit on every node's critical path (load, slab distances,
+// interval, mask, child, next node; docs/results.md#traversal-kernels). Integer order is float order for +0 up to +inf;
+// a negative float (-0 too) reads as a negative integer, below all of those. The near distances meet tmin >= +0
+// (kernel_tmin), so their maximum is the float maximum; the far ones meet tmax, and their minimum is the float minimum
+// unless one of them is negative, when it reads negative and the box, behind the origin, is culled. The one NaN a
+// SlabRay leaves, an empty slot's, is x86's default NaN, negative: as a far distance it culls that slot.
 [[gnu::always_inline]] inline int32_t distance_bits(float t) { return std::bit_cast<int32_t>(t); }
 
 // Slab test of every child box against [tmin, tmax]; returns a bit mask of the children hit and their entry
@@ -276,8 +275,7 @@ template <class Node, class Leaf>
 
 // Starts the fetch of a node's child references with that of its boxes, where they lie on a cache line of their
 // own (BVH8: boxes on lines 0 to 2, references on line 3). Otherwise that line is requested only once the slab
-// test has chosen a child, a second miss on every node's critical path: crytek-sponza bvh8 frames 1.12x Embree
-// MEDIUM's before, 1.09x after; conference 1.087x, 1.062x; sibenik equal (means of 3 or 4 alternating runs).
+// test has chosen a child, a second miss on every node's critical path (docs/results.md#traversal-kernels).
 template <int N>
 [[gnu::always_inline]] inline void prefetch_child_line(const WideNode<N>& node) {
     if constexpr (sizeof(node.planes) % 64 == 0) _mm_prefetch(reinterpret_cast<const char*>(node.child), _MM_HINT_T0);
@@ -313,7 +311,7 @@ template <class Tree, class TriangleTest, class Counter>
 }
 
 // A triangle test set up on first use, constructed in place: std::optional's emplace left GCC an out-of-line
-// std::_Construct call for it (0.5% of a crytek-sponza frame's samples on its own).
+// std::_Construct call for it, visible in a frame's profile (docs/results.md#traversal-kernels).
 template <class TriangleTest>
 class LazyTest {
     static_assert(std::is_trivially_destructible_v<TriangleTest>);
@@ -370,8 +368,8 @@ template <Query Q, int N, class Tree, class Counter, class LeafFn>
             uint32_t mask = intersect_children<N>(node, ray, t_min, tfar, tnear);
             // The counts through a pointer the compiler cannot relate to the child references: else GCC adds the
             // references' offset to the lane index, to share one address for both loads, an add on the way from
-            // the node's test to its child's loads. With lowest_lane: a ray's time 0.8 to 2.2% less against Embree's
-            // in tests/kernel_replay (docs/results.md, the node step's instructions), frames within their noise.
+            // the node's test to its child's loads, measurable in the traversal alone
+            // (docs/results.md#the-node-steps-instructions-and-variants-measured-on-one-thread).
             const auto* counts = node.count;
             asm("" : "+r"(counts));
 
@@ -405,10 +403,9 @@ template <Query Q, int N, class Tree, class Counter, class LeafFn>
                 for (; mask; mask &= mask - 1) push(lowest_lane(mask));
                 current = *--sp;
                 // Only the two children popped next are prefetched (three or more were hit, so both are this
-                // node's). Every pushed child's four lines, as before, crowded the load queue with lines a nearer hit
-                // often culls: with the next child alone prefetched, binned bvh8 frames took 0.912x and 0.888x
-                // Embree MEDIUM's on sibenik against 0.931x and 0.936x, 0.877x and 0.868x on crytek-sponza against
-                // 0.923x and 0.902x. The second child's prefetch: frames the same, rays 1% faster in kernel_replay.
+                // node's): every pushed child's four lines crowded the load queue with lines a nearer hit often
+                // culls, and the second child's prefetch still made the traversal alone a little faster
+                // (docs/results.md#a-rays-set-up-and-the-stacks-prefetches).
                 prefetch(nodes, leaves, sp[-1]);
                 prefetch(nodes, leaves, sp[-2]);
                 continue;
@@ -433,9 +430,8 @@ template <Query Q, bool Robust, class TriangleTest, int N, class Tree, class Cou
     const float tmin = kernel_tmin(ray);
     // The triangle test is set up at once for a ray that starts inside the scene's box, since such a ray nearly
     // always reaches a leaf and the setup then overlaps the first nodes' work; else at the first leaf, since many
-    // rays from outside reach none. Set up always, crytek-sponza bvh8 frames took 1.042x Embree MEDIUM's against
-    // 1.076x set up at the first leaf, but stanford-bunny's 1.083x against 1.044x; gated this way, 1.049x against
-    // 1.083x and 1.032x against 1.038x (another batch; means of four alternating runs each).
+    // rays from outside reach none: setting up always sped up rooms and slowed objects seen from outside, the gate
+    // keeps the first without the second (docs/results.md#traversal-kernels).
     LazyTest<TriangleTest> tri_ray;
     if (bounds.contains(ray.org)) tri_ray.set(ray);
     const auto leaf = [&](const StackEntry& entry) __attribute__((always_inline)) {
@@ -459,8 +455,8 @@ template <Query Q, bool Robust, class TriangleTest, int N, class Tree, class Cou
 // Closest hit (Query::Closest) or any hit (Query::Any) in (kernel_tmin(ray), ray.tmax]. For Any, `hit` holds the
 // first hit found, not the closest. One out-of-line function per kernel with every piece of the loop forced
 // inline: in the renderer's translation unit, which instantiates every width, mode and top level, GCC had left
-// the node test a call per node reading the ray through memory (crytek-sponza bvh8 frames 1.29x Embree MEDIUM's
-// before, 1.22x after; bunny 1.30x, 1.20x). Inlining the whole traversal into the path tracer measured slower.
+// the node test a call per node reading the ray through memory (docs/results.md#traversal-kernels). Inlining the
+// whole traversal into the path tracer measured slower.
 template <Query Q, bool Robust = true, class TriangleTest = WatertightRay, int N, class Counter = NoCount>
 [[gnu::noinline]] bool traverse(const WideBvh<N>& bvh, const Ray& ray, Hit& hit, Counter&& counter = {}) {
     return detail::traverse_flat<Q, Robust, TriangleTest, N>(bvh, ray, hit, counter);

@@ -9,11 +9,9 @@
 // watertight kernels a ray's closest hit is the single-ray kernel's (up to exact ties between triangles).
 //
 // A packet's leaves test one triangle against every lane at once (watertight_packet.h), and its rays' slab data is
-// set up in lanes, not ray by ray. On conference's diffuse rays a packet reaches a leaf with about 15 rays, where
-// the leaf's 8-lane blocks hold about 4.6 triangles: the stream tracer's frames took 0.97x and 0.98x their time with
-// the block test lane by lane (two alternating bench runs), then 0.95x with the set-up in lanes (three alternating
-// one-thread renders: 4.10 to 4.16 s against 4.28 to 4.34 s). By rdtsc, trace_packet's time went 63% to rays on
-// their own after the switch, 12% to the packet's set-up, 12% to packet node tests and 6% to packet leaves.
+// set up in lanes, not ray by ray: on diffuse rays a packet reaches a leaf with more rays than the leaf's blocks
+// hold triangles, so a lane per ray keeps more lanes busy (docs/results.md#tracers-single-and-stream; where
+// trace_packet's time goes: docs/results.md#traversal-kernels).
 #include "kernels/packet_lanes.h"
 #include "kernels/traverse.h"
 #include "kernels/watertight_packet.h"
@@ -26,11 +24,8 @@
 
 namespace canopy {
 
-// Rays below which a packet's subtree is finished ray by ray: a packet pays where most of its lanes are busy. With
-// 16-ray packets, stream frames against the single-path tracer's (one bench run each, 2 threads): crytek-sponza
-// 0.87, 0.85, 0.80, 0.74, 0.80, 0.84 with 3, 6, 8, 10, 12, 14; conference 0.82, 0.81, 0.83 and sibenik 0.79, 0.79,
-// 0.79 with 8, 10, 12 (the single-ray kernel on the same sorted batches: 0.92 to 1.01, 0.91 to 0.92, 0.88). With
-// the leaves tested across lanes, conference's packet traversal took the same cycles (within 5%) from 2 to 10.
+// Rays below which a packet's subtree is finished ray by ray: a packet pays where most of its lanes are busy, and
+// 10 of 16 traced fastest of the thresholds tried (docs/results.md#traversal-kernels).
 constexpr int kPacketSwitch = 10;
 
 // Whether this build has the packet kernel (AVX2 lanes); without it, packets trace ray by ray.
@@ -196,8 +191,7 @@ template <int N, class TriangleTest>
 
 // Pushes the children of `node` that some active lane enters, far to near by the entry distance of the lowest such
 // lane, each with its lanes and their distances, and starts fetching them: most are finished by rays on their own,
-// whose first node is then on its way (conference stream frames 0.794x and 0.801x Embree MEDIUM's stream in two
-// runs with the prefetch, 0.810x and 0.814x without).
+// whose first node is then on its way (docs/results.md#traversal-kernels).
 template <int N, class TriangleTest>
 [[gnu::always_inline]] inline PacketEntry* push_children(const WideBvh<N>& bvh, const WideNode<N>& node, uint32_t rays,
                                                          const PacketRays<N, TriangleTest>& p, PacketEntry* sp) {

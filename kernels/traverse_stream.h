@@ -2,11 +2,10 @@
 // Batch queries: closest or any hit for a span of rays, each ray's answer exactly the single-ray kernel's. A batch
 // is traced ray by ray by the single-ray kernel (BatchTraversal::Single), or, for flat trees, in packets of 16 rays
 // (BatchTraversal::Packet, traverse_packet.h; 8 without AVX-512) or as a ray stream (BatchTraversal::Stream). On the
-// wavefront tracer's sorted diffuse path rays, 16-ray hybrid packets traced fastest (see kPacketSwitch: 0.74 to 0.82
-// of the single-path tracer's frame time against 0.88 to 1.01 for the single-ray kernel on the same batches). Ray
-// streams traced slowest: crytek-sponza 1.21x the single-path frame (1.07x to 1.27x on one thread over chunks of 4k
-// to 64k rays and fallback thresholds of 8 to 64 rays), as did 8-ray AVX2 packets (0.94x to 1.05x). Packet is the
-// default; Single and Stream are kept, tested, for comparison and further work.
+// wavefront tracer's sorted diffuse path rays, 16-ray hybrid packets traced fastest (see kPacketSwitch), ray streams
+// slowest, slower than the single-path tracer at every chunk size and fallback threshold tried, and 8-ray AVX2
+// packets no faster than single rays (docs/results.md#tracers-single-and-stream). Packet is the default; Single and
+// Stream are kept, tested, for comparison and further work.
 //
 // Flat trees are walked by a ray stream (Barringer and Akenine-Möller 2014, "Dynamic Ray Stream Traversal", sec. 3,
 // with wide nodes): a node is visited once for all the rays that reach it; each of those rays is tested against
@@ -180,7 +179,11 @@ inline BatchTraversal parse_batch_traversal(const std::string& name) {
 }
 
 inline const char* batch_traversal_name(BatchTraversal how) {
-    return how == BatchTraversal::Single ? "single" : how == BatchTraversal::Packet ? "packet" : "stream";
+    switch (how) {
+        case BatchTraversal::Single: return "single";
+        case BatchTraversal::Packet: return "packet";
+        default: return "stream";
+    }
 }
 
 // Closest hit (Query::Closest) or any hit (Query::Any) of every ray of `rays` into `hits` (same length), each
@@ -190,7 +193,8 @@ template <Query Q, bool Robust = true, class TriangleTest = WatertightRay, int N
                                       StreamScratch<N>& scratch, BatchTraversal how = BatchTraversal::Single,
                                       Counter&& counter = {}) {
     if (how == BatchTraversal::Single) return detail::trace_each<Q, Robust, TriangleTest>(bvh, rays, hits, counter);
-    if (how == BatchTraversal::Packet) return traverse_packets<Q, Robust, TriangleTest>(bvh, rays, hits, counter);
+    if (how == BatchTraversal::Packet)
+        return traverse_packets<Q, Robust, TriangleTest>(bvh, rays, hits, counter);
     for (size_t i = 0; i < rays.size(); ++i) {
         hits[i] = Hit{};
         hits[i].t = rays[i].tmax;

@@ -27,8 +27,8 @@ bool enter_object(const WideBvh<N>& pool, const TopLevelRef& entry, const SlabRa
 }
 
 // The top-level leaf `leaf`, a run of instance entries: each entered with the ray in its instance's space. Out
-// of line, so the instanced loop stays small (crytek-sponza frames about 2% faster when it still ran this loop;
-// within noise on zoo-64). world_tri() gives the world ray's triangle test.
+// of line, so the instanced loop stays small (docs/results.md#traversal-kernels). world_tri() gives the world
+// ray's triangle test.
 template <Query Q, bool Robust, class TriangleTest, int N, class Counter, class WorldTri>
 [[gnu::noinline]] bool enter_instances(const TwoLevelBvh<N>& bvh, const StackEntry& leaf, const Ray& ray, float tmin,
                                        const SlabRay<N>& world_box, WorldTri&& world_tri, Hit& hit, Counter& counter) {
@@ -42,8 +42,7 @@ template <Query Q, bool Robust, class TriangleTest, int N, class Counter, class 
             here = enter_object<Q>(bvh.pool, entry, world_box, world_tri, tmin, hit, counter);
         } else {
             // Direction is not renormalised, so distances along the ray stay world distances. The triangle test's
-            // setup waits for a leaf: most entries miss every box below them (zoo-64: of 1.9 entries a ray, 0.84
-            // reach a leaf; frames 3% faster).
+            // setup waits for a leaf: most entries miss every box below them (docs/results.md#traversal-kernels).
             const Ray local{instance.point(ray.org), instance.vector(ray.dir), tmin, hit.t};
             LazyTest<TriangleTest> local_tri;
             const SlabRay<N> local_box(local, bvh.objects[instance.object].frame, Robust);
@@ -77,8 +76,8 @@ template <Query Q, bool Robust, class TriangleTest, int N, class Counter>
 
 // A structure without instance entries (every BRef of a direct() placement, as in a scene of one file's objects)
 // is walked by the flat kernel's own loop from the top level's root: the instanced loop, whose call to
-// enter_instances is never taken there, traced crytek-sponza's re-braided frames in 1.024x and 1.021x the flat
-// tree's time, this one in 0.923x and 0.947x (alternating binaries, two runs each).
+// enter_instances is never taken there, traced such a structure slower than the flat tree, this one faster
+// (docs/results.md#traversal-kernels).
 template <Query Q, bool Robust, class TriangleTest, int N, class Counter>
 [[gnu::noinline]] void traverse_direct(const TwoLevelBvh<N>& bvh, const Ray& ray, Hit& hit, Counter& counter) {
     traverse_tree<Q, Robust, TriangleTest, N>(bvh.pool, bvh.root, bvh.bounds, bvh.pool.frame, ray, hit, counter);

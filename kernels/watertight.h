@@ -30,8 +30,8 @@ public:
     // Without branches: the axes come from a comparison mask through tables, and coordinates are read by index
     // from memory (glm's operator[] is a switch), since the choice follows the ray's direction, which no branch
     // predictor can guess. The tables are static (a local constexpr array was copied to the stack on every call)
-    // and |dir| is three ANDs (glm::abs compiled to compare-and-blend): crytek-sponza bvh8 frames 1.13x Embree
-    // MEDIUM's before, 1.11x after (two runs each; 1 to 3% on sibenik, conference and stanford-bunny).
+    // and |dir| is three ANDs (glm::abs compiled to compare-and-blend), both a shorter set-up on every ray
+    // (docs/results.md#traversal-kernels).
     struct Shear {
         int kx, ky, kz;
         float sx, sy, sz;
@@ -72,8 +72,7 @@ public:
         const auto [kx, ky, kz, sx, sy, sz] = shear_;
         // Sheared 2D coordinates (sec. 3, eq. 5), each one FMA: a shorter path to the edge functions than a product
         // and a difference, and one rounding, not two. A shared vertex still shears to the same point in every
-        // triangle, which is all watertightness asks. crytek-sponza bvh8 frames 1.069x Embree MEDIUM's before,
-        // 1.045x after; sibenik 1.064x, 1.036x (means of 4 and 3 alternating runs).
+        // triangle, which is all watertightness asks (docs/results.md#traversal-kernels).
         const float ax = std::fma(-sx, a[kz], a[kx]), ay = std::fma(-sy, a[kz], a[ky]);
         const float bx = std::fma(-sx, b[kz], b[kx]), by = std::fma(-sy, b[kz], b[ky]);
         const float cx = std::fma(-sx, c[kz], c[kx]), cy = std::fma(-sy, c[kz], c[ky]);

@@ -1,7 +1,7 @@
 #pragma once
 // The watertight test (watertight.h) of a leaf's triangles against a packet of rays, a ray a lane, one triangle
-// at a time: where a ray's own block test takes a leaf's 8-lane blocks, about 4.6 of them holding a triangle on
-// conference's diffuse rays, a packet reaches a leaf with about 15 rays. Each lane permutes and shears by its own
+// at a time: on diffuse rays a packet reaches a leaf with more rays than the leaf's 8-lane blocks hold triangles
+// (docs/results.md#tracers-single-and-stream). Each lane permutes and shears by its own
 // ray's axes, so its arithmetic is, operation for operation, its ray's WatertightRay::intersect_block lane: the
 // same hit at the same distance, ties going to the later triangle as there.
 #include "kernels/packet_lanes.h"

@@ -1,5 +1,5 @@
 #pragma once
-#include "accel/geometry.h"
+#include "base/geometry.h"
 
 #include <string>
 #include <utility>

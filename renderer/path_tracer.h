@@ -24,8 +24,7 @@ struct FrameSettings {
     int width = 1024, height = 768;
     TracerKind tracer = TracerKind::Single;
     // stream: paths in flight per batch at most (each batch on one thread). Larger batches sort into more coherent
-    // rays: crytek-sponza stream frames 0.950x, 0.924x and 0.922x the single tracer's with 64k, 256k and 512k (one
-    // run), at 25, 74 and 148 MB for two threads.
+    // rays, and past this size gain little for their memory (docs/results.md#tracers-single-and-stream).
     uint32_t stream_paths = 1u << 18;
     BatchTraversal batch_traversal = BatchTraversal::Packet;  // stream: how canopy's kernels trace a batch
     bool embree_packets = false;  // stream: Embree's batches in rtcIntersect16 packets, not through rtcIntersect1M
@@ -59,34 +58,75 @@ struct PathState {
     Vec3 throughput{1.0f}, radiance{0.0f};
 };
 
+// What shading reads of a hit, filled in by each tracer from what it has at hand, so that no tracer pays for what
+// another needs: canopy's from the hit triangle's corners, Embree's from its hit record alone.
+struct SurfaceHit {
+    Vec3 normal;        // the geometric normal, of any length and facing either side
+    Vec3 point;         // the hit point
+    float point_error;  // how far `point` may lie off the surface: added to the next ray's offset
+    uint32_t prim;      // the flat scene's triangle id: its material
+};
+
+// A hit from its triangle's corners: the point from the barycentrics, whose error scales with the corners.
+inline SurfaceHit triangle_surface(const Triangle& tri, const Hit& hit) {
+    return {geometric_normal(tri), tri.v0 + hit.u * (tri.v1 - tri.v0) + hit.v * (tri.v2 - tri.v0),
+            triangle_point_error(tri), hit.prim};
+}
+
+// A hit from the ray's distance and the normal the intersector reported, as an Embree user shades: the point along
+// the ray, no triangle read.
+inline SurfaceHit ray_surface(const Ray& ray, float t, const Vec3& normal, uint32_t prim) {
+    const Vec3 p = ray.org + t * ray.dir;
+    return {normal, p, ray_point_error(p, t), prim};
+}
+
 // One bounce's shading, shared by every tracer so that `single` and `stream` paths mean the same: a miss adds the
 // white sky and ends the path; a hit adds what its material emits (under --materials; no next-event estimation),
 // takes the albedo and, unless `depth` was the last bounce, turns `ray` into the next bounce's ray. Returns whether
-// the path goes on. `corners`: the hit triangle, when the tracer gave it (else read from the scene).
-[[gnu::always_inline]] inline bool shade_bounce(const ShadingScene& scene, const Ray& ray, const Hit& hit, bool found,
-                                                int depth, PathState& path, Rng& rng, Ray& next,
-                                                const Triangle* corners = nullptr) {
+// the path goes on. `surface` is read only when `found`.
+[[gnu::always_inline]] inline bool shade_bounce(const ShadingScene& scene, const Ray& ray, bool found, const SurfaceHit& surface,
+                                                int depth, PathState& path, Rng& rng, Ray& next) {
     if (!found) {
         path.radiance += path.throughput;  // white sky
         return false;
     }
-    const Triangle& tri = corners ? *corners : scene.flat.triangles[hit.prim];
-    Vec3 n = geometric_normal(tri);
+    Vec3 n = surface.normal;
     const float len2 = glm::dot(n, n);
     n = len2 > 0.0f && std::isfinite(len2) ? n / std::sqrt(len2) : -ray.dir;
     if (glm::dot(n, ray.dir) > 0.0f) n = -n;
-    if (scene.emitters) path.radiance += path.throughput * scene.emission(hit.prim);
-    path.throughput *= scene.albedo(hit.prim);
+    if (scene.emitters) path.radiance += path.throughput * scene.emission(surface.prim);
+    path.throughput *= scene.albedo(surface.prim);
     if (depth == scene.settings.max_bounces) return false;
-    const Vec3 p = tri.v0 + hit.u * (tri.v1 - tri.v0) + hit.v * (tri.v2 - tri.v0);
     // Written member by member, not as next = Ray{...}: GCC built that temporary with small stores and copied it
-    // with one 32-byte load, which waited for them (a failed store forward, 13% of this loop's samples with
-    // canopy's kernels, which read the ray from memory; Embree's copy reads the members one by one).
-    next.org = offset_ray_origin(p, n, triangle_point_error(tri));
+    // with one 32-byte load, which waited for them: a failed store forward that stalled canopy's kernels, which read
+    // the ray from memory (docs/results.md#traversal-kernels; Embree's copy reads the members one by one).
+    next.org = offset_ray_origin(surface.point, n, surface.point_error);
     next.dir = cosine_direction(n, rng.next_float(), rng.next_float());
     next.tmin = 0.0f;
     next.tmax = std::numeric_limits<float>::infinity();
     return true;
+}
+
+// One closest-hit query of a single-ray tracer and what shading reads of its hit, by the cheapest means the tracer
+// offers: its own SurfaceHit (Embree's hit record), the hit triangle's corners from the leaf it read (canopy's flat
+// trees), or else the scene's copy of the hit triangle.
+template <class Tracer>
+[[gnu::always_inline]] inline bool closest_surface(const Tracer& tracer, const ShadingScene& scene, const Ray& ray,
+                                                   SurfaceHit& surface) {
+    if constexpr (requires { tracer.closest(ray, surface); }) {
+        return tracer.closest(ray, surface);
+    } else if constexpr (requires(Hit& hit, Triangle& corners) { tracer.closest(ray, hit, corners); }) {
+        Hit hit;
+        Triangle corners;
+        if (!tracer.closest(ray, hit, corners)) return false;
+        surface = triangle_surface(corners, hit);
+        return true;
+    } else {
+        Hit hit;
+        if (!tracer.closest(ray, hit)) return false;
+        surface = triangle_surface(scene.flat.triangles[hit.prim], hit);
+        return true;
+    }
 }
 
 // One path from its first ray; `ray` then holds each bounce's ray in turn. By reference, so the caller's ray is the
@@ -95,14 +135,10 @@ template <class Tracer>
 Vec3 trace_path(const Tracer& tracer, const ShadingScene& scene, Ray& ray, Rng& rng, uint64_t& rays) {
     PathState path;
     for (int depth = 0;; ++depth) {
-        Hit hit;
         ++rays;
-        Triangle corners;
-        const Triangle* given = nullptr;  // the tracer's corners of the hit triangle, where it has them
-        bool found;
-        if constexpr (requires { tracer.closest(ray, hit, corners); }) found = tracer.closest(ray, hit, corners), given = &corners;
-        else found = tracer.closest(ray, hit);
-        if (!shade_bounce(scene, ray, hit, found, depth, path, rng, ray, given)) break;
+        SurfaceHit surface;
+        const bool found = closest_surface(tracer, scene, ray, surface);
+        if (!shade_bounce(scene, ray, found, surface, depth, path, rng, ray)) break;
     }
     return path.radiance;
 }

@@ -1,7 +1,7 @@
 #pragma once
 // A protocol frame's diffuse rays, recorded once, and single-thread passes over them: how `canopy study` and
 // tests/kernel_replay time kernels on the same rays, without shading, tiles or threads.
-#include "renderer/accelerator.h"
+#include "renderer/frames.h"
 #include "renderer/camera.h"
 #include "renderer/path_tracer.h"
 

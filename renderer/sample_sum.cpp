@@ -49,7 +49,7 @@ SampledImage render_samples(const Accelerator& accel, const ShadingScene& shadin
     for (uint32_t s = begin; s < end; ++s) {
         const auto on_tile = [&](float f) { progress((float(s - begin) + f) / float(end - begin)); };
         Image sample(width, height);
-        rays += accel.render(shading, camera, first_frame + s, sample,
+        rays += render(accel, shading, camera, first_frame + s, sample,
                              progress ? std::function<void(float)>(on_tile) : std::function<void(float)>());
         mine.push(s, 0, std::move(sample));
     }

@@ -1,7 +1,7 @@
 #pragma once
 // An image of many samples whose bits do not depend on how its samples were split between processes: the
 // samples are summed in one fixed pairwise tree over their indices, whichever rank rendered them.
-#include "renderer/accelerator.h"
+#include "renderer/frames.h"
 #include "renderer/image.h"
 
 #include <cstdint>

@@ -1,6 +1,6 @@
 #pragma once
 // Random numbers, cosine-weighted directions and robust ray offsets for the path tracer.
-#include "accel/geometry.h"
+#include "base/geometry.h"
 
 #include <bit>
 #include <cmath>
@@ -35,8 +35,9 @@ private:
 };
 
 // cos and sin of 2 pi u for u in [0, 1): the nearest quarter turn q, exactly, and Taylor polynomials of the
-// remaining angle in [-pi/4, pi/4] (float rounding's error, below 2e-7), rotated by q. libm's sincosf took 5% of a crytek-sponza
-// frame; a sampled direction needs no more than float accuracy, and none of sincosf's range reduction.
+// remaining angle in [-pi/4, pi/4] (float rounding's error, below 2e-7), rotated by q. libm's sincosf showed in a
+// frame's profile (docs/results.md#traversal-kernels); a sampled direction needs no more than float accuracy, and
+// none of sincosf's range reduction.
 inline std::pair<float, float> turn_cos_sin(float u) {
     const float x = 4.0f * u, q = std::nearbyint(x);
     const float a = (x - q) * 1.57079632679489662f, a2 = a * a;
@@ -49,9 +50,8 @@ inline std::pair<float, float> turn_cos_sin(float u) {
 
 // Cosine-weighted direction about unit normal n (Malley's method), with the orthonormal basis of
 // Duff et al. 2017, "Building an Orthonormal Basis, Revisited". The result is unit length as it stands (weights
-// whose squares sum to 1 on orthonormal t, s, n; within 3.3e-7 over 20 M samples): normalising it again put a square
-// root and a division on the way from each hit to the next ray: without them canopy's one-thread frames took 0.97x
-// (conference) and 0.99x (sibenik) as long, Embree's within noise (docs/results.md, shading's second normalisation).
+// whose squares sum to 1 on orthonormal t, s, n): normalising it again put a square root and a division on the way
+// from each hit to the next ray (docs/results.md#shadings-second-normalisation).
 inline Vec3 cosine_direction(const Vec3& n, float u1, float u2) {
     const float sign = std::copysign(1.0f, n.z);
     const float a = -1.0f / (sign + n.z);
@@ -85,6 +85,14 @@ inline Vec3 offset_ray_origin(const Vec3& p, const Vec3& n, float triangle_error
 inline float triangle_point_error(const Triangle& t) {
     const Vec3 m = glm::max(glm::abs(t.v0), glm::max(glm::abs(t.v1), glm::abs(t.v2)));
     return 7.0f * 0x1p-24f / (1.0f - 7.0f * 0x1p-24f) * std::max(m.x, std::max(m.y, m.z));
+}
+
+// How far a hit point computed as org + t dir may lie from the surface, for an intersector that reports the distance
+// and the normal but not the triangle (Embree's hit record): the point's own rounding scales with its coordinates and
+// the distance travelled, and the distance carries the intersector's rounding, a few ulps of the same magnitudes;
+// 32 ulps of their sum covers both with a margin.
+inline float ray_point_error(const Vec3& p, float t) {
+    return 32.0f * 0x1p-24f * (std::max(std::abs(p.x), std::max(std::abs(p.y), std::abs(p.z))) + t);
 }
 
 }  // namespace canopy

@@ -1,5 +1,5 @@
 #pragma once
-// The wavefront path tracer (`--tracer stream`): the frame's pixels in batches of FrameSettings::stream_paths
+// The wavefront path tracer (`--tracer stream`): the frame's pixels in batches of at most FrameSettings::stream_paths
 // paths, each batch on one thread; a batch's live paths advance one bounce at a time: their rays are sorted
 // (kernels/ray_order.h), traced as one batch through the tracer's batch query, shaded by the same shade_bounce as
 // the single-path tracer, and the paths still alive compacted for the next bounce. A path keeps its own random
@@ -7,7 +7,9 @@
 // and the ray count, are the single-path tracer's (up to exact ties between triangles).
 //
 // A batch tracer has `Scratch` (its per-thread memory, with `bytes()`) and
-// `void closest(std::span<const Ray>, std::span<Hit>, Scratch&) const`.
+// `void closest(std::span<const Ray>, std::span<Record>, Scratch&) const`, where Record is its `Record` if it names
+// one, else Hit: a record with `found()` that shading_surface turns into what shading reads (a Hit, through the
+// scene's copy of its triangle).
 #include "kernels/ray_order.h"
 #include "renderer/path_tracer.h"
 
@@ -19,6 +21,7 @@
 #include <atomic>
 #include <chrono>
 #include <span>
+#include <type_traits>
 
 namespace canopy {
 
@@ -34,6 +37,40 @@ inline uint64_t working_threads() {
                             tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
 }
 
+// How a frame's pixels are dealt into batches: square tiles of `side` pixels, tile k (in raster order) to batch k
+// mod `batches`, each tile's pixels row by row. Every batch holds the same mix of sky and geometry, so the threads
+// finish together, and a batch's camera rays reach the scene tile by tile, as the single-path tracer's do, so that
+// neighbouring rays find its nodes in cache (a row of spans across the whole image did not).
+struct BatchPlan {
+    uint64_t batches, side, width, height;
+
+    // At most `most` paths a batch, and at least kBatchesPerThread batches a thread (a frame of fewer paths than one
+    // batch would otherwise leave every other thread idle), as many as a multiple of the threads.
+    static constexpr uint64_t kBatchesPerThread = 2;
+    static constexpr uint64_t kSide = 16;  // a tile row is a packet's rays
+    static BatchPlan of(uint64_t width, uint64_t height, uint64_t most, uint64_t threads) {
+        most = std::max<uint64_t>(1, most), threads = std::max<uint64_t>(1, threads);
+        uint64_t side = kSide;
+        while (side > 1 && side * side > most) side /= 2;
+        const uint64_t tiles = (width + side - 1) / side * ((height + side - 1) / side);
+        const uint64_t per_batch = most / (side * side);
+        uint64_t batches = (tiles + per_batch - 1) / per_batch;
+        batches = std::max(batches, threads * kBatchesPerThread);
+        batches = (batches + threads - 1) / threads * threads;
+        return {std::max<uint64_t>(1, std::min(batches, tiles)), side, width, height};
+    }
+    // Calls f(pixel) for every pixel (y * width + x) of batch `b`.
+    template <class F>
+    void for_each_pixel(uint64_t b, F&& f) const {
+        const uint64_t tiles_x = (width + side - 1) / side, tiles = tiles_x * ((height + side - 1) / side);
+        for (uint64_t t = b; t < tiles; t += batches) {
+            const uint64_t x0 = t % tiles_x * side, y0 = t / tiles_x * side;
+            for (uint64_t y = y0; y < std::min(y0 + side, height); ++y)
+                for (uint64_t x = x0; x < std::min(x0 + side, width); ++x) f(uint32_t(y * width + x));
+        }
+    }
+};
+
 namespace detail {
 
 struct StreamPath {
@@ -46,22 +83,32 @@ struct StreamPath {
 // rays are sorted: the tracer reads them in key order, and their hits go back to their paths' places, so shading
 // reads paths, rays and hits in order and adds finished paths to the image in pixel order. Gathering the paths into
 // key order too cost more (it was three quarters of the sort's time, the paths being larger than rays and hits).
-template <class Scratch>
+template <class Scratch, class Record>
 struct Wavefront {
     std::vector<StreamPath> paths;
     std::vector<Ray> rays, sorted_rays;
-    std::vector<Hit> hits, sorted_hits;
+    std::vector<Record> hits, sorted_hits;
     std::vector<uint32_t> keys, order, radix_scratch;
+    bool sorted = false;  // whether this bounce's rays are traced from sorted_rays into sorted_hits
     Scratch scratch;
 
     size_t bytes() const {
         return paths.capacity() * sizeof(StreamPath) + (rays.capacity() + sorted_rays.capacity()) * sizeof(Ray) +
-               (hits.capacity() + sorted_hits.capacity()) * sizeof(Hit) +
+               (hits.capacity() + sorted_hits.capacity()) * sizeof(Record) +
                (keys.capacity() + order.capacity() + radix_scratch.capacity()) * sizeof(uint32_t) + scratch.bytes();
     }
 
-    // The first `live` rays in key order, into sorted_rays.
-    void sort(uint32_t live, const RayOrderKey& key) {
+    // The first `live` rays in key order, into sorted_rays. The key's cells divide the box of these rays' origins,
+    // not the scene's: a view of a small part of a large scene still sorts its rays into many cells. Rays from one
+    // point (a pinhole camera's) stay in pixel order: their runs of neighbouring pixels are coherent packets already,
+    // and a key of octant alone would only pay a full sort to pull the runs apart.
+    void sort(uint32_t live) {
+        BBox origins;
+        for (uint32_t i = 0; i < live; ++i)
+            if (std::isfinite(rays[i].org.x) && std::isfinite(rays[i].org.y) && std::isfinite(rays[i].org.z)) origins.extend(rays[i].org);
+        sorted = origins.lower != origins.upper;
+        if (!sorted) return;
+        const RayOrderKey key(origins);
         keys.resize(live);
         for (uint32_t i = 0; i < live; ++i) keys[i] = key(rays[i]);
         radix_order(keys, order, radix_scratch);
@@ -69,8 +116,17 @@ struct Wavefront {
         for (uint32_t i = 0; i < live; ++i) sorted_rays[i] = rays[order[i]];
     }
 
+    // The rays of this bounce in the order they are traced, and where their hits go.
+    std::span<const Ray> traced_rays(uint32_t live) const { return {(sorted ? sorted_rays : rays).data(), live}; }
+    std::span<Record> traced_hits(uint32_t live) {
+        std::vector<Record>& into = sorted ? sorted_hits : hits;
+        into.resize(live);
+        return {into.data(), live};
+    }
+
     // Each sorted ray's hit back to its path's place.
     void unsort(uint32_t live) {
+        if (!sorted) return;
         hits.resize(live);
         for (uint32_t i = 0; i < live; ++i) hits[order[i]] = sorted_hits[i];
     }
@@ -83,16 +139,36 @@ uint64_t timed_ns(F&& f) {
     return uint64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - start).count());
 }
 
+// The record a batch tracer's closest fills: its Record where it names one, else Hit.
+template <class BatchTracer>
+struct BatchRecord {
+    using type = Hit;
+};
+template <class BatchTracer>
+    requires requires { typename BatchTracer::Record; }
+struct BatchRecord<BatchTracer> {
+    using type = typename BatchTracer::Record;
+};
+
 // Shading reads the hit triangle, which tracing the whole batch has long evicted from the L1 and L2 caches (the
 // single-path tracer shades it just after testing it). Fetching it this many paths ahead hides that miss.
 constexpr uint32_t kShadePrefetch = 16;
 
-[[gnu::always_inline]] inline void prefetch_hit_triangle(const ShadingScene& scene, const std::vector<Hit>& hits,
+// Records that carry what shading reads (Embree's) have nothing to fetch.
+template <class Record>
+[[gnu::always_inline]] inline void prefetch_hit_triangle(const ShadingScene& scene, const std::vector<Record>& hits,
                                                          uint32_t i, uint32_t live) {
-    if (i < live && hits[i].found()) _mm_prefetch(reinterpret_cast<const char*>(&scene.flat.triangles[hits[i].prim]), _MM_HINT_T0);
+    if constexpr (std::is_same_v<Record, Hit>) {
+        if (i < live && hits[i].found()) _mm_prefetch(reinterpret_cast<const char*>(&scene.flat.triangles[hits[i].prim]), _MM_HINT_T0);
+    }
 }
 
 }  // namespace detail
+
+// What shading reads of a batch tracer's Hit: the scene's copy of its triangle.
+[[gnu::always_inline]] inline SurfaceHit shading_surface(const ShadingScene& scene, const Ray&, const Hit& hit) {
+    return triangle_surface(scene.flat.triangles[hit.prim], hit);
+}
 
 // Renders one sample per pixel of frame `frame` into `accumulated`, as render_frame does, through the tracer's batch
 // query. Returns rays traced. `on_batch` (optional) is called after each batch with the fraction of the frame done.
@@ -100,37 +176,28 @@ template <class BatchTracer>
 uint64_t render_frame_stream(const BatchTracer& tracer, const ShadingScene& scene, const PinholeCamera& camera,
                              uint32_t frame, Image& accumulated, const std::function<void(float)>& on_batch = {}) {
     StreamStats* const stats = scene.stream_stats;
-    using Wavefront = detail::Wavefront<typename BatchTracer::Scratch>;
+    using Record = typename detail::BatchRecord<BatchTracer>::type;
+    using Wavefront = detail::Wavefront<typename BatchTracer::Scratch, Record>;
     const int w = scene.settings.width;
-    const uint64_t pixels = uint64_t(w) * uint64_t(scene.settings.height);
-    // Equal batches of at most stream_paths paths, as many as a multiple of the threads, so no thread idles while
-    // another traces a last batch alone.
-    const uint64_t threads = working_threads();
-    const uint64_t most = std::max<uint32_t>(1, scene.settings.stream_paths);
-    uint64_t batches = (pixels + most - 1) / most;
-    if (batches > 1) batches = (batches + threads - 1) / threads * threads;
-    const uint64_t batch = (pixels + batches - 1) / batches;
-    const RayOrderKey key(scene.flat.bounds);
+    const BatchPlan plan = BatchPlan::of(uint64_t(w), uint64_t(scene.settings.height), scene.settings.stream_paths,
+                                         working_threads());
     static tbb::enumerable_thread_specific<Wavefront> wavefronts;  // reused from frame to frame
     std::atomic<uint64_t> rays{0}, done{0}, sort_ns{0};
-    tbb::parallel_for(uint64_t(0), batches, [&](uint64_t b) {
+    tbb::parallel_for(uint64_t(0), plan.batches, uint64_t(1), [&](uint64_t b) {
         Wavefront& wf = wavefronts.local();
-        const uint64_t first = std::min(b * batch, pixels);
-        uint32_t live = uint32_t(std::min(batch, pixels - first));
-        wf.paths.resize(live);
-        wf.rays.resize(live);
-        for (uint32_t i = 0; i < live; ++i) {
-            const uint32_t pixel = uint32_t(first + i);
+        wf.paths.clear();
+        wf.rays.clear();
+        plan.for_each_pixel(b, [&](uint32_t pixel) {
             const int x = int(pixel % uint32_t(w)), y = int(pixel / uint32_t(w));
-            wf.paths[i] = {PathState{}, Rng(uint64_t(y) * uint64_t(w) + uint64_t(x), frame), pixel};
-            const float u = wf.paths[i].rng.next_float(), v = wf.paths[i].rng.next_float();
-            wf.rays[i] = camera.generate(x, y, u, v);
-        }
+            wf.paths.push_back({PathState{}, Rng(uint64_t(y) * uint64_t(w) + uint64_t(x), frame), pixel});
+            const float u = wf.paths.back().rng.next_float(), v = wf.paths.back().rng.next_float();
+            wf.rays.push_back(camera.generate(x, y, u, v));
+        });
+        uint32_t live = uint32_t(wf.paths.size());
         uint64_t traced = 0, sorting = 0;
         for (int depth = 0; live > 0; ++depth) {
-            sorting += detail::timed_ns([&] { wf.sort(live, key); });
-            wf.sorted_hits.resize(live);
-            tracer.closest(std::span<const Ray>(wf.sorted_rays.data(), live), std::span<Hit>(wf.sorted_hits.data(), live), wf.scratch);
+            sorting += detail::timed_ns([&] { wf.sort(live); });
+            tracer.closest(wf.traced_rays(live), wf.traced_hits(live), wf.scratch);
             sorting += detail::timed_ns([&] { wf.unsort(live); });
             traced += live;
             uint32_t next_live = 0;
@@ -138,7 +205,9 @@ uint64_t render_frame_stream(const BatchTracer& tracer, const ShadingScene& scen
                 detail::prefetch_hit_triangle(scene, wf.hits, i + detail::kShadePrefetch, live);
                 detail::StreamPath& path = wf.paths[i];
                 Ray next;
-                if (shade_bounce(scene, wf.rays[i], wf.hits[i], wf.hits[i].found(), depth, path.state, path.rng, next)) {
+                const bool found = wf.hits[i].found();
+                const SurfaceHit surface = found ? shading_surface(scene, wf.rays[i], wf.hits[i]) : SurfaceHit{};
+                if (shade_bounce(scene, wf.rays[i], found, surface, depth, path.state, path.rng, next)) {
                     wf.paths[next_live] = path;
                     wf.rays[next_live++] = next;
                 } else {
@@ -149,7 +218,7 @@ uint64_t render_frame_stream(const BatchTracer& tracer, const ShadingScene& scen
         }
         rays += traced;
         sort_ns += sorting;
-        if (on_batch) on_batch(float(done.fetch_add(1) + 1) / float(batches));
+        if (on_batch) on_batch(float(done.fetch_add(1) + 1) / float(plan.batches));
     });
     if (stats) {
         stats->sort_ns += sort_ns;

@@ -643,8 +643,8 @@ struct Bulge {
     double radius, depth;
 };
 
-// Scanner noise of +-0.4% of the cube's half size: a function of the point alone, so that faces meeting at an edge
-// move their shared points alike and the surface stays closed.
+// Scanner noise, a small fraction of the cube's half size either way: a function of the point alone, so that faces
+// meeting at an edge move their shared points alike and the surface stays closed.
 double scan_noise(const dvec3& p) {
     uint64_t h = 0x9E3779B97F4A7C15ull;
     for (int axis = 0; axis < 3; ++axis) {

@@ -48,20 +48,30 @@ BBox emit_triangles(const Mesh& mesh, const std::vector<Vec3>& world, Triangle* 
         merge);
 }
 
-// A mesh without per-triangle materials, in a scene where other meshes have them, gets a
-// default material so that FlatScene::material covers every triangle.
-void append_materials(const Mesh& mesh, FlatScene& flat) {
-    if (!mesh.triangle_material.empty()) {
-        flat.material.insert(flat.material.end(), mesh.triangle_material.begin(), mesh.triangle_material.end());
-        return;
-    }
+// A mesh without per-triangle materials, in a scene where other meshes have them, gets a default material so that
+// FlatScene::material covers every triangle: "(default)", added after the scene's materials when it has none.
+uint32_t default_material(FlatScene& flat) {
     const auto is_default = [](const Material& m) { return m.name == "(default)"; };
     auto fallback = std::find_if(flat.materials.begin(), flat.materials.end(), is_default);
     if (fallback == flat.materials.end()) {
         flat.materials.push_back({"(default)", Vec3(0.8f)});
         fallback = flat.materials.end() - 1;
     }
-    flat.material.insert(flat.material.end(), mesh.triangles.size(), uint32_t(fallback - flat.materials.begin()));
+    return uint32_t(fallback - flat.materials.begin());
+}
+
+// The mesh's materials at `out`, or the default material for a mesh without them.
+void write_materials(const Mesh& mesh, uint32_t fallback, uint32_t* out) {
+    if (mesh.triangle_material.empty()) std::fill_n(out, mesh.triangles.size(), fallback);
+    else std::copy(mesh.triangle_material.begin(), mesh.triangle_material.end(), out);
+}
+
+// Where each instance's triangles start in the flat arrays, and (last) their total.
+std::vector<size_t> instance_offsets(const Scene& scene) {
+    std::vector<size_t> offsets(scene.instances.size() + 1, 0);
+    for (size_t i = 0; i < scene.instances.size(); ++i)
+        offsets[i + 1] = offsets[i] + scene.meshes.at(scene.instances[i].mesh).triangles.size();
+    return offsets;
 }
 
 // The watertight test multiplies up to three vertex coordinates relative to the ray origin: past about 7e12 the
@@ -149,24 +159,35 @@ uint64_t instanced_triangle_count(const Scene& scene) {
     return count;
 }
 
+// Instances are written concurrently, each at its offset: the same arrays, in instance order, as one at a time.
 FlatScene flatten(const Scene& scene) {
     FlatScene flat;
-    flat.triangles.resize(instanced_triangle_count(scene));
+    const std::vector<size_t> offsets = instance_offsets(scene);
+    flat.triangles.resize(offsets.back());
     const bool with_materials = !scene.materials.empty();
+    uint32_t fallback = 0;
     if (with_materials) {
         flat.materials = scene.materials;
-        flat.material.reserve(flat.triangles.size());
+        const bool any_without = std::any_of(scene.instances.begin(), scene.instances.end(), [&](const Instance& instance) {
+            return scene.meshes[instance.mesh].triangle_material.empty();
+        });
+        if (any_without) fallback = default_material(flat);
+        flat.material.resize(flat.triangles.size());
         flat.has_emitters = std::any_of(scene.materials.begin(), scene.materials.end(),
                                         [](const Material& m) { return m.emission != Vec3(0.0f); });
     }
-    size_t offset = 0;
-    for (const Instance& instance : scene.instances) {
-        const Mesh& mesh = scene.meshes.at(instance.mesh);
-        const std::vector<Vec3> world = transformed(mesh.positions, instance.transform);
-        flat.bounds.extend(emit_triangles(mesh, world, flat.triangles.data() + offset));
-        if (with_materials) append_materials(mesh, flat);
-        offset += mesh.triangles.size();
-    }
+    flat.bounds = tbb::parallel_reduce(
+        tbb::blocked_range<size_t>(0, scene.instances.size(), 1), BBox{},
+        [&](const tbb::blocked_range<size_t>& r, BBox bounds) {
+            for (size_t i = r.begin(); i < r.end(); ++i) {
+                const Mesh& mesh = scene.meshes[scene.instances[i].mesh];
+                const std::vector<Vec3> world = transformed(mesh.positions, scene.instances[i].transform);
+                bounds.extend(emit_triangles(mesh, world, flat.triangles.data() + offsets[i]));
+                if (with_materials) write_materials(mesh, fallback, flat.material.data() + offsets[i]);
+            }
+            return bounds;
+        },
+        merge);
     check_representable(scene.name, flat.bounds);
     return flat;
 }

@@ -1,8 +1,7 @@
 #pragma once
 // The loaded scene: meshes made of objects (OBJ o/g groups), instances placing meshes, a camera.
 // Only positions and faces are kept: canopy loads no attribute that it does not use.
-#include "accel/geometry.h"
-#include "accel/memory_budget.h"
+#include "base/geometry.h"
 
 #include <glm/mat4x4.hpp>
 #include <cstdint>
@@ -85,6 +84,14 @@ inline Camera scene_camera(const Scene& scene, const FlatScene& flat) {
 // Loads a scene from a path (.json scene file or .obj) or a generator spec "gen:NAME?tris=N&seed=S".
 // The empty name loads the embedded default scene.
 Scene load_scene(const std::string& name);
+
+// What is known of a scene before it is built: for a generator spec, before a triangle is generated.
+struct SceneSize {
+    uint64_t vertices = 0;             // stored positions, over all meshes
+    uint64_t triangles = 0;            // stored triangles, over all meshes (each once, however often placed)
+    uint64_t instanced_triangles = 0;  // with every placement expanded: what flatten() produces
+    uint64_t instances = 1;
+};
 
 // Sees a scene's size and throws to refuse it (require_memory does, with an estimate of the build).
 using SceneSizeCheck = std::function<void(const SceneSize&)>;

@@ -1,6 +1,6 @@
 // Structural invariants of every builder's trees, SAH by eq. 1, thread-count independence.
 #include "oracle.h"
-#include "renderer/accelerator.h"
+#include "engine/accelerator.h"
 #include "test_scale.h"
 
 #include <tbb/global_control.h>

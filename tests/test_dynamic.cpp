@@ -1,7 +1,8 @@
 // Dynamic-in-static scenes (Benthin et al. 2017, sec. 6.3): after the object moves, every top level and Embree
 // trace the moved world triangles as brute force does, frame images show it where its placement puts it, the
 // motion is deterministic, rigid, closed and inside the scene, and --dynamic names itself when it is wrong.
-#include "renderer/commands/dynamic.h"
+#include "experiments/dynamic.h"
+#include "experiments/embree_accelerator.h"
 #include "two_level_support.h"
 
 #include <glm/gtc/matrix_inverse.hpp>

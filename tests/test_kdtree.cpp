@@ -4,7 +4,7 @@
 #include "accel/kdtree.h"
 #include "kernels/traverse_kd.h"
 #include "oracle.h"
-#include "renderer/accelerator.h"
+#include "renderer/frames.h"
 #include "test_scale.h"
 
 #include <tbb/global_control.h>
@@ -341,18 +341,18 @@ TEST_CASE("the kdtree accelerator renders, counts and reports as the BVH acceler
     const ShadingScene shading{flat, settings};
     const PinholeCamera camera(scene_camera(scene, flat), settings.width, settings.height);
     Image kd_image(settings.width, settings.height), binned_image(settings.width, settings.height);
-    const uint64_t kd_rays = kd->render(shading, camera, 0, kd_image);
-    const uint64_t binned_rays = binned->render(shading, camera, 0, binned_image);
+    const uint64_t kd_rays = render(*kd, shading, camera, 0, kd_image);
+    const uint64_t binned_rays = render(*binned, shading, camera, 0, binned_image);
     CHECK(kd_rays == binned_rays);
     CHECK(kd_image.mean(1) == Approx(binned_image.mean(1)).epsilon(5e-3));  // the bench's bar: paths part only at ties
 
     FrameSettings stream = settings;
     stream.tracer = TracerKind::Stream;
     Image stream_image(settings.width, settings.height);
-    CHECK(kd->render({flat, stream}, camera, 0, stream_image) == kd_rays);
+    CHECK(render(*kd, {flat, stream}, camera, 0, stream_image) == kd_rays);
     CHECK(stream_image.mean(1) == Approx(kd_image.mean(1)).epsilon(1e-6));
 
-    const auto [counts, rays] = kd->count_frame(shading, camera, 0);
+    const auto [counts, rays] = count_frame(*kd, shading, camera, 0);
     CHECK(rays == kd_rays);
     CHECK(counts.inner_nodes > 0);
     CHECK(counts.leaf_nodes > 0);

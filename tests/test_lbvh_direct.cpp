@@ -3,7 +3,7 @@
 #include "accel/morton.h"
 #include "accel/metrics.h"
 #include "oracle.h"
-#include "renderer/accelerator.h"
+#include "renderer/frames.h"
 #include "test_scale.h"
 
 #include <tbb/global_control.h>

@@ -1,7 +1,7 @@
 // Tree quality metrics against hand-computed values.
 #include "accel/metrics.h"
 #include "oracle.h"
-#include "renderer/commands/study.h"
+#include "experiments/study.h"
 #include "test_scale.h"
 
 #include <nlohmann/json.hpp>

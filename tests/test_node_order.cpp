@@ -1,7 +1,7 @@
 // The node-order experiment (study --permute-nodes, Aila et al. 2013 sec. 6): a permuted tree is the same tree in
 // another memory order, so every query answers exactly as before.
 #include "oracle.h"
-#include "renderer/accelerator.h"
+#include "renderer/frames.h"
 
 #include <cstring>
 

@@ -1,6 +1,6 @@
 // Watertightness, extreme coordinates and scales, special directions and degenerate geometry.
 #include "oracle.h"
-#include "renderer/commands/accuracy.h"
+#include "experiments/accuracy.h"
 #include "test_scale.h"
 
 #include <cmath>

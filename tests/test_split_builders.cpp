@@ -6,7 +6,7 @@
 #include "accel/builders/presplit.h"
 #include "accel/builders/sbvh.h"
 #include "oracle.h"
-#include "renderer/accelerator.h"
+#include "renderer/frames.h"
 
 #include <cstring>
 #include <limits>

@@ -2,9 +2,10 @@
 // (renderer/wavefront.h): every batch answer is the single-ray kernel's, and the stream tracer renders the same
 // paths as the single-path tracer.
 #include "kernels/ray_order.h"
+#include "experiments/embree_accelerator.h"
 #include "kernels/traverse_stream.h"
 #include "oracle.h"
-#include "renderer/accelerator.h"
+#include "renderer/frames.h"
 #include "renderer/wavefront.h"
 #include "test_scale.h"
 #include "two_level_support.h"
@@ -264,15 +265,15 @@ struct Frame {
 };
 
 Frame render_with(const Accelerator& accel, const Scene& scene, const FlatScene& flat, TracerKind tracer, uint32_t paths,
-                  int bounces = 8) {
+                  BatchTraversal how = BatchTraversal::Packet) {
     FrameSettings settings;
-    settings.width = 48, settings.height = 36, settings.max_bounces = bounces;
-    settings.tracer = tracer, settings.stream_paths = paths;
+    settings.width = 48, settings.height = 36;
+    settings.tracer = tracer, settings.stream_paths = paths, settings.batch_traversal = how;
     StreamStats stats;
     const ShadingScene shading{flat, settings, &stats};
     Image image(settings.width, settings.height);
     const PinholeCamera camera(scene_camera(scene, flat), settings.width, settings.height);
-    const uint64_t rays = accel.render(shading, camera, 3, image);
+    const uint64_t rays = render(accel, shading, camera, 3, image);
     if (tracer == TracerKind::Stream) CHECK(stats.bytes.load() > 0);
     return {image.average(1), image.mean(1), rays};
 }
@@ -290,13 +291,14 @@ TEST_CASE("the stream tracer renders the single-path tracer's paths", "[stream]"
             accel->prepare();
             accel->build();
             const Frame single = render_with(*accel, scene, flat, TracerKind::Single, 0);
-            // Batches that split the image unevenly, a path each, and the whole frame in one batch.
-            for (uint32_t paths : {1u, 97u, 1u << 16}) {
-                INFO(spec << " " << kernel << ", " << paths << " paths a batch");
-                const Frame stream = render_with(*accel, scene, flat, TracerKind::Stream, paths);
-                CHECK(stream.rays == single.rays);
-                CHECK(stream.pixels == single.pixels);
-            }
+            // Batches that split the image unevenly, a path each, and a frame of fewer paths than one batch.
+            for (uint32_t paths : {1u, 97u, 1u << 16})
+                for (BatchTraversal how : {BatchTraversal::Packet, BatchTraversal::Single}) {
+                    INFO(spec << " " << kernel << ", " << paths << " paths a batch, " << batch_traversal_name(how));
+                    const Frame stream = render_with(*accel, scene, flat, TracerKind::Stream, paths, how);
+                    CHECK(stream.rays == single.rays);
+                    CHECK(stream.pixels == single.pixels);
+                }
         }
     }
 }
@@ -312,4 +314,32 @@ TEST_CASE("Embree's stream rows trace the same paths as its single rows", "[stre
     // Embree's stream and single kernels may round differently: statistics, not bits.
     CHECK(double(stream.rays) == Approx(double(single.rays)).epsilon(0.001));
     CHECK(stream.mean == Approx(single.mean).epsilon(0.005));
+}
+
+TEST_CASE("a frame's batches hold every pixel once, at most the batch size, at least two a thread", "[stream]") {
+    struct Case {
+        uint64_t width, height, most, threads;
+    };
+    for (const Case c : {Case{512, 384, 1u << 18, 2}, Case{1024, 768, 1u << 18, 2}, Case{48, 36, 1, 2}, Case{48, 36, 97, 3},
+                         Case{48, 36, 1u << 16, 8}, Case{5, 1, 1u << 18, 4}, Case{0, 0, 16, 2}, Case{33, 17, 300, 2}}) {
+        INFO(c.width << " x " << c.height << " pixels, batches of at most " << c.most << ", " << c.threads << " threads");
+        const BatchPlan plan = BatchPlan::of(c.width, c.height, c.most, c.threads);
+        std::vector<int> seen(c.width * c.height, 0);
+        for (uint64_t b = 0; b < plan.batches; ++b) {
+            uint64_t paths = 0;
+            plan.for_each_pixel(b, [&](uint32_t pixel) { ++seen[pixel], ++paths; });
+            CHECK(paths <= c.most);
+        }
+        CHECK(std::all_of(seen.begin(), seen.end(), [](int n) { return n == 1; }));
+        // Every thread has batches where there are tiles enough (a frame smaller than one batch included).
+        const uint64_t tiles = (c.width + plan.side - 1) / plan.side * ((c.height + plan.side - 1) / plan.side);
+        CHECK(plan.batches >= std::min(tiles, c.threads * BatchPlan::kBatchesPerThread));
+        if (plan.batches < tiles) CHECK(plan.batches % c.threads == 0);
+    }
+    // The small-frame case that left a thread idle: 512 x 384 paths, fewer than one batch of 2^18.
+    CHECK(BatchPlan::of(512, 384, 1u << 18, 2).batches == 4);
+    // A batch's first 16 paths are its first tile's top row: a packet of neighbouring camera rays.
+    std::vector<uint32_t> first;
+    BatchPlan::of(1024, 768, 1u << 18, 2).for_each_pixel(1, [&](uint32_t pixel) { first.push_back(pixel); });
+    for (uint32_t i = 0; i < 17; ++i) CHECK(first[i] == (i < 16 ? 16 + i : 1024 + 16));
 }

@@ -2,6 +2,7 @@
 // flattened world triangles, with instances rotated, scaled non-uniformly and overlapping; re-braiding is
 // deterministic; transformed boxes are conservative.
 #include "two_level_support.h"
+#include "experiments/embree_accelerator.h"
 #include "kernels/traverse_two_level.h"
 
 #include <glm/gtc/matrix_transform.hpp>
@@ -33,6 +34,35 @@ TEST_CASE("every top level agrees with brute force over instanced, transformed o
     embree->prepare();
     embree->build();
     CHECK(disagreements(*embree, rays, expected, 1e-5f * glm::length(flat.bounds.extent())) <= rays.size() / 1000);
+}
+
+// Embree reports an instanced triangle's normal in object space; shading turns it to world space. With the normal
+// left in object space, the rotated, non-uniformly scaled instances would scatter their paths elsewhere.
+TEST_CASE("Embree's two-level rows shade instanced triangles as its flat row does", "[two-level][embree]") {
+    const Scene scene = instanced_scene();
+    const FlatScene flat = flatten(scene);
+    const auto flat_embree = make_embree_accelerator(flat, "medium", 0);
+    const auto two_level = make_embree_two_level_accelerator(scene, flat, "medium", 0);
+    for (Accelerator* accel : {flat_embree.get(), two_level.get()}) {
+        accel->prepare();
+        accel->build();
+    }
+    const auto frame_of = [&](const Accelerator& accel, TracerKind tracer) {
+        FrameSettings settings;
+        settings.width = 96, settings.height = 72, settings.tracer = tracer, settings.stream_paths = 1000;
+        const ShadingScene shading{flat, settings};
+        Image image(settings.width, settings.height);
+        const uint64_t rays = canopy::render(accel, shading, PinholeCamera(scene_camera(scene, flat), settings.width, settings.height), 0, image);
+        return std::pair{rays, image.mean(1)};
+    };
+    const auto [flat_rays, flat_mean] = frame_of(*flat_embree, TracerKind::Single);
+    for (const TracerKind tracer : {TracerKind::Single, TracerKind::Stream}) {
+        const auto [rays, mean] = frame_of(*two_level, tracer);
+        INFO((tracer == TracerKind::Single ? "single" : "stream"));
+        // Object-space rounding moves a few grazing hits: statistics, not bits.
+        CHECK(double(rays) == Approx(double(flat_rays)).epsilon(0.002));
+        CHECK(mean == Approx(flat_mean).epsilon(0.005));
+    }
 }
 
 TEST_CASE("re-braiding agrees with brute force at every opening threshold, and opens more BRefs at a lower one", "[two-level]") {
@@ -205,6 +235,33 @@ TEST_CASE("the re-braided top level is the same with 1 and 2 threads", "[two-lev
     REQUIRE(one.pool.leaves.size() == two.pool.leaves.size());
     CHECK(one.pool.leaves.size() > one.object_leaves);  // leaves were opened into the top level's own
     CHECK(std::memcmp(one.pool.leaves.data(), two.pool.leaves.data(), one.pool.leaves.size() * sizeof(one.pool.leaves[0])) == 0);
+}
+
+TEST_CASE("both top levels over hundreds of placements are the same with 1 and 2 threads", "[two-level]") {
+    // Enough BRefs that the top level's subtrees build as parallel tasks, the plain top level's included.
+    Scene scene = load_scene("gen:surface?tris=800&seed=9");
+    for (int i = 0; i < 300; ++i) {
+        const glm::mat4 moved = glm::translate(glm::mat4(1.0f), Vec3(0.7f * float(i % 17), 0.3f * float(i % 5), 0.9f * float(i / 17)));
+        scene.instances.push_back({0, glm::rotate(moved, 0.37f * float(i), glm::normalize(Vec3(1, 2 + i % 3, 3)))});
+    }
+    const TwoLevelInput input = two_level_input(scene);
+    for (const TopLevel top : {TopLevel::TwoLevel, TopLevel::Rebraid}) {
+        TwoLevelSettings settings;
+        settings.top = top;
+        auto build = [&](int threads) {
+            tbb::global_control limit(tbb::global_control::max_allowed_parallelism, size_t(threads));
+            return build_two_level<4>(input, settings);
+        };
+        const TwoLevelBvh<4> one = build(1), two = build(2);
+        INFO((top == TopLevel::Rebraid ? "rebraid" : "two-level"));
+        REQUIRE(one.pool.nodes.size() == two.pool.nodes.size());
+        REQUIRE(one.entries.size() == two.entries.size());
+        REQUIRE(one.pool.leaves.size() == two.pool.leaves.size());
+        CHECK(one.pool.nodes.size() - one.object_nodes > 64 / 4);  // a top level of many nodes, not one leaf
+        CHECK(std::memcmp(one.pool.nodes.data(), two.pool.nodes.data(), one.pool.nodes.size() * sizeof(WideNode<4>)) == 0);
+        CHECK(std::memcmp(one.entries.data(), two.entries.data(), one.entries.size() * sizeof(TopLevelRef)) == 0);
+        CHECK(std::memcmp(one.pool.leaves.data(), two.pool.leaves.data(), one.pool.leaves.size() * sizeof(one.pool.leaves[0])) == 0);
+    }
 }
 
 TEST_CASE("re-braiding lowers the SAH of the plain two-level top level", "[two-level]") {

@@ -2,7 +2,7 @@
 // Two-level test support: a scene of instanced, transformed, overlapping objects, and the comparison of an
 // accelerator's hits with brute force over the flattened world triangles.
 #include "oracle.h"
-#include "renderer/accelerator.h"
+#include "renderer/frames.h"
 
 #include <glm/gtc/matrix_transform.hpp>
 

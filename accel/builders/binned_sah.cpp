@@ -1,7 +1,7 @@
 #include "accel/builders/binned_sah.h"
 
 #include "accel/sah_binning.h"
-#include "accel/sparse_tree.h"
+#include "accel/top_down_builder.h"
 
 namespace canopy {
 namespace {
@@ -10,64 +10,54 @@ using namespace sah_binning;
 
 constexpr size_t kParallelSubtreeGrain = 4 * 1024;
 
-struct Range {
-    uint32_t begin, end;
-    Box4 bounds, centroids;  // centroids of doubled centres (PrimRef::center2)
-    uint32_t size() const { return end - begin; }
-};
-
-class BinnedSahBuilder {
+// Binned SAH over the references' centroids (accel/sah_binning.h), for TopDownBuilder.
+class BinnedSahSearch {
 public:
-    BinnedSahBuilder(std::vector<PrimRef>& refs, const BuildSettings& settings)
+    struct Node {
+        uint32_t begin, end;
+        Box4 bounds, centroids;  // centroids of doubled centres (PrimRef::center2)
+    };
+    struct Split {
+        BinMapping mapping;
+        sah_binning::Split best;
+        float cost;
+        bool found() const { return best.axis >= 0; }
+    };
+    using Children = std::pair<Node, Node>;
+
+    BinnedSahSearch(std::vector<PrimRef>& refs, const BuildSettings& settings)
         : refs_(refs), settings_(settings), bins_(std::clamp<uint32_t>(settings.bins, 2, kMaxBins)),
-          max_leaf_(std::max<uint32_t>(settings.max_leaf_size, 1)), nodes_(refs.size()) {}
+          max_leaf_(std::max<uint32_t>(settings.max_leaf_size, 1)) {}
 
-    Bvh build(const Range& root) {
-        build_subtree(root, 0, 1, 0);
-        Bvh bvh;
-        bvh.refs.resize(refs_.size());
-        parallel::for_each(refs_.size(), 64 * 1024, [&](size_t i) { bvh.refs[i] = refs_[i].prim; });
-        bvh.nodes = nodes_.finish();
-        return bvh;
-    }
-
-private:
-    // Builds the subtree over `range` rooted at slot `node`, its descendants from slot `descendants` on (slots as
-    // SparseTree reserves them); returns how far past `descendants` its descendants reach.
-    uint32_t build_subtree(const Range& range, uint32_t node, uint32_t descendants, uint32_t depth) {
-        const uint32_t n = range.size();
-        if (n > 1 && !leaf_always_cheaper(n) && depth < kMedianFallbackDepth && spread(range.centroids) > 0.0f) {
-            const BinMapping mapping(range.centroids, object_bin_count(bins_, n));
-            const Split split = best_split(bin_refs(refs_.data(), range.begin, range.size(), mapping), mapping.bins, settings_);
-            const float area = range.bounds.half_area();
-            const float split_cost = settings_.costs.inner * area + settings_.costs.triangle * split.cost;
-            const bool leaf_is_cheaper = n <= max_leaf_ && settings_.costs.triangle * settings_.leaf_tests(n) * area <= split_cost;
-            if (split.axis >= 0 && !leaf_is_cheaper) return partition(range, mapping, split, node, descendants, depth);
-        }
-        if (n <= max_leaf_) return nodes_.set_leaf(node, range.bounds.bbox(), range.begin, n);
-        return split_at_median(range, node, descendants, depth);  // coincident centroids, or too deep
-    }
+    void prepare(Node&) const {}
+    static uint32_t count(const Node& node) { return node.end - node.begin; }
+    static uint32_t first(const Node& node) { return node.begin; }
+    static uint32_t slots(const Node& node) { return count(node); }
+    static BBox box(const Node& node) { return node.bounds.bbox(); }
+    static float half_area(const Node& node) { return node.bounds.half_area(); }
 
     // Whether a leaf of n references beats every split without binning them: a leaf that one block test covers
     // costs C_tri A, and a split at least C_inn A plus its children's tests, so the leaf wins (ties go to leaves)
-    // wherever C_inn >= C_tri. Most of a tree's nodes are that small.
-    bool leaf_always_cheaper(uint32_t n) const {
+    // wherever C_inn >= C_tri; and coincident centroids leave nothing to bin. Most of a tree's nodes are that small.
+    bool leaf_without_search(const Node& node) const {
+        const uint32_t n = count(node);
         return n <= max_leaf_ && settings_.leaf_tests(n) <= 1.0f && settings_.costs.inner >= settings_.costs.triangle;
     }
 
-    static float spread(const Box4& b) {
-        alignas(16) float e[4];
-        _mm_store_ps(e, _mm_sub_ps(b.upper, b.lower));
-        return e[0] + e[1] + e[2];
+    Split find(const Node& node) const {
+        const uint32_t n = count(node);
+        const BinMapping mapping(node.centroids, object_bin_count(bins_, n));
+        if (!(spread(node.centroids) > 0.0f)) return {mapping, sah_binning::Split{}, 0.0f};
+        const sah_binning::Split best = best_split(bin_refs(refs_.data(), node.begin, n, mapping), mapping.bins, settings_);
+        return {mapping, best, best.cost};
     }
 
     // Hoare partition by bin; the children's centroid bounds are gathered on the way.
-    uint32_t partition(const Range& range, const BinMapping& mapping, const Split& split, uint32_t node,
-                       uint32_t descendants, uint32_t depth) {
+    std::optional<Children> split(const Node& node, const Split& chosen) {
         PrimRef* refs = refs_.data();
-        uint32_t l = range.begin, r = range.end;
+        uint32_t l = node.begin, r = node.end;
         Box4 left_centroids = Box4::empty(), right_centroids = Box4::empty();
-        const BinMapping::Plane plane = mapping.plane(split.axis, split.bin);
+        const BinMapping::Plane plane = chosen.mapping.plane(chosen.best.axis, chosen.best.bin);
         auto goes_left = [&](uint32_t i) { return plane.left_of(refs[i]); };
         for (;;) {
             while (l < r && goes_left(l)) left_centroids.extend(center2(refs[l++]));
@@ -77,36 +67,34 @@ private:
             left_centroids.extend(center2(refs[l++]));
             right_centroids.extend(center2(refs[--r]));
         }
-        return emit_children({range.begin, l, split.left, left_centroids}, {l, range.end, split.right, right_centroids},
-                             range, node, descendants, depth);
+        return Children{{node.begin, l, chosen.best.left, left_centroids}, {l, node.end, chosen.best.right, right_centroids}};
     }
 
-    uint32_t split_at_median(const Range& range, uint32_t node, uint32_t descendants, uint32_t depth) {
-        const uint32_t mid = range.begin + range.size() / 2;
-        return emit_children(bounds_of(range.begin, mid), bounds_of(mid, range.end), range, node, descendants, depth);
+    // Coincident centroids, or too deep: the halves of the range as it lies.
+    Children median(const Node& node) const {
+        const uint32_t mid = node.begin + count(node) / 2;
+        return {bounds_of(node.begin, mid), bounds_of(mid, node.end)};
     }
 
-    Range bounds_of(uint32_t begin, uint32_t end) const {
-        Range r{begin, end, Box4::empty(), Box4::empty()};
+private:
+    static float spread(const Box4& b) {
+        alignas(16) float e[4];
+        _mm_store_ps(e, _mm_sub_ps(b.upper, b.lower));
+        return e[0] + e[1] + e[2];
+    }
+
+    Node bounds_of(uint32_t begin, uint32_t end) const {
+        Node node{begin, end, Box4::empty(), Box4::empty()};
         for (uint32_t i = begin; i < end; ++i) {
-            r.bounds.extend(Box4::of(refs_[i]));
-            r.centroids.extend(center2(refs_[i]));
+            node.bounds.extend(Box4::of(refs_[i]));
+            node.centroids.extend(center2(refs_[i]));
         }
-        return r;
-    }
-
-    uint32_t emit_children(const Range& left, const Range& right, const Range& parent, uint32_t node,
-                           uint32_t descendants, uint32_t depth) {
-        return nodes_.set_inner(
-            node, parent.bounds.bbox(), descendants, left.size(), parent.size(), kParallelSubtreeGrain,
-            [&](uint32_t first) { return build_subtree(left, descendants, first, depth + 1); },
-            [&](uint32_t first) { return build_subtree(right, descendants + 1, first, depth + 1); });
+        return node;
     }
 
     std::vector<PrimRef>& refs_;
     const BuildSettings& settings_;
     const uint32_t bins_, max_leaf_;
-    SparseTree nodes_;
 };
 
 }  // namespace
@@ -129,8 +117,14 @@ Bvh build_binned_sah(BuildInput&& input, const BuildSettings& settings) {
     };
     const auto [box, centroids] = parallel::reduce(input.refs.size(), kParallelGrain,
                                                    std::pair{Box4::empty(), Box4::empty()}, bounds, join);
-    BinnedSahBuilder builder(input.refs, settings);
-    return builder.build({0, uint32_t(input.refs.size()), box, centroids});
+    BinnedSahSearch search(input.refs, settings);
+    const TopDownLimits limits{std::max<uint32_t>(settings.max_leaf_size, 1), kMedianFallbackDepth, kParallelSubtreeGrain};
+    TopDownBuilder<BinnedSahSearch> builder(search, settings, limits, input.refs.size());
+    Bvh bvh;
+    bvh.nodes = builder.build({0, uint32_t(input.refs.size()), box, centroids});
+    bvh.refs.resize(input.refs.size());
+    parallel::for_each(input.refs.size(), 64 * 1024, [&](size_t i) { bvh.refs[i] = input.refs[i].prim; });
+    return bvh;
 }
 
 }  // namespace canopy

@@ -26,9 +26,10 @@ uint64_t early_split_clip_count(std::span<const Triangle> triangles, const std::
 // floors: their pieces mix into subtrees of other geometry and inflate them). So, with A_ideal the box area of a
 // triangle cut into infinitely fine pieces (twice its projected areas, Karras and Aila 2013 sec. 5):
 //   fill = sum A_ideal / sum A_box over the scene;
-//   fill >= 0.1 (boxes on the whole at most 10x what their triangles need): no splitting, SA_max = infinity;
-//   otherwise SA_max = 8 median(A_ideal): pieces are cut until a typical triangle's box is filled to an eighth
-//   (on gen:cylinders?tris=2000000: +190% references, frames 2.9x faster than binned SAH).
+//   fill >= 0.1 (boxes on the whole at most ten times what their triangles need): no splitting, SA_max = infinity;
+//   otherwise SA_max = 8 median(A_ideal): pieces are cut until a typical triangle's box is filled to an eighth,
+//   which on a sliver field buys a much faster frame for more references
+//   (docs/results.md#split-builders-on-a-sliver-field).
 // Measured fills: every scene in ../shared/scenes, gen:surface, gen:box, gen:triangles 0.31-0.48; gen:cylinders 0.03.
 // Returns infinity for no splitting.
 float automatic_sa_max(std::span<const Triangle> triangles, const std::vector<PrimRef>& refs);

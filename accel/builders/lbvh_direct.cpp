@@ -58,8 +58,8 @@ private:
     // Smaller scenes are built on one thread.
     static constexpr size_t kParallelRefs = 16 * 1024;
     static constexpr uint32_t kTopDepth = wide_writing::kTopDepth<N>;
-    // References past the leaf being written (the next leaves', in Morton order) whose PrimRefs are fetched ahead:
-    // crytek-sponza's bvh8 built in 10.2 to 10.5 ms with it and 11.7 to 11.9 without (2 threads, three runs each).
+    // References past the leaf being written (the next leaves', in Morton order) whose PrimRefs are fetched ahead,
+    // since the leaves gather them at random and the build waited on them (docs/results.md#builds-and-layouts).
     static constexpr uint32_t kPrefetchRefs = 2 * kLanes;
 
     static constexpr auto slot_of = wide_writing::top_slot<N>;
@@ -85,8 +85,8 @@ private:
 
     // The children of the wide node over [begin, end): the whole range, then the child of the largest weight that
     // does not fit a block split in two (the first of equals), until there are N or all fit a block. Splitting by
-    // count alone (Embree's Morton builder's rule) traced 1.097x the optimal collapse's frames against 1.080x, over
-    // ten scenes (docs/results.md, "lbvh's direct wide tree").
+    // count alone (Embree's Morton builder's rule) traced slower over ten scenes
+    // (docs/results.md#lbvhs-direct-wide-tree).
     Children<N> children_of(uint32_t begin, uint32_t end) const {
         Children<N> c;
         std::array<float, N> weights;

@@ -15,6 +15,7 @@
 #include "accel/builders/tree_rotations.h"
 #include "accel/builders/treelet_restructuring.h"
 #include "accel/kdtree.h"
+#include "accel/memory_budget.h"
 
 #include <algorithm>
 #include <stdexcept>
@@ -23,44 +24,25 @@ namespace canopy {
 
 namespace {
 
-// The priors of `--builder auto`'s candidates below were fitted on the issue-28 validation run of 2026-12-04 (`canopy
-// bench SCENE --builder auto,binned,sweep,lbvh,sbvh,esc,bonsai-split,bittner --builds 3 --frames 10`, every shared
-// scene but the zoos and the procedural classes at their default sizes; 2 threads, bvh8, Zen 5), so the priors have
-// seen those scenes: they only order the calibration and predict the candidates it does not measure.
-// Builds, ns a triangle: binned 160 to 230, sweep 280 to 400, lbvh 90 to 130, sbvh 550 to 1660 (slivers 1550 to
-// 1950), esc as binned where it does not split (slivers 790 to 820), bonsai-split 190 to 350 (slivers 340 to 580),
-// bittner 2200 to 4700 (slivers 9600 to 12600). Since then binning (batched), node storage and the collapse got
-// faster: binned, esc and sbvh's priors are scaled by their builds' measured speed-ups (same scenes and trees, old
-// and new binaries alternating: binned 0.73 to 0.79, esc 0.82 and 0.89 where it splits, sbvh 0.85 and 0.99 on
-// slivers; sweep, lbvh and bonsai-split 0.97 to 1.0). sbvh's own builds got faster still (issue 32): in the
-// validation run of 2026-12-06 (commit 0302ee6) they took 2.6x to 6.5x binned's time on the shared scenes and
-// generators without slivers, geometric mean 3.9 (binned's prior times 3.9 is its prior here), where the older prior
-// said 6.5; the others' ratios to binned's were within 15% of their priors'.
-// Frames relative to binned's, in the order crossing slivers, clustered slivers, dense boxes, other architecture,
-// other scenes (renderer/auto_builder.cpp tells them apart).
+// A candidate's prior: build time per triangle built (without and with slivers), and frames relative to binned's in
+// the order crossing slivers, clustered slivers, dense boxes, other architecture, other scenes (engine/auto_builder.cpp
+// tells them apart), each about the middle of what the builder's frames measured in that class. Fitted on bench runs of
+// every candidate over the shared scenes and the procedural classes, and builds scaled by each builder's later
+// measured speed-ups (docs/results.md#autos-priors-and-samples), so the priors have seen those scenes: they only order
+// the calibration and predict the candidates it does not measure.
 constexpr AutoPrior kBinnedPrior{145.0, 145.0, 1.0, 1.0, 1.0, 1.0, 1.0};
-// crytek-sponza 0.92; other architecture 1.00 to 1.15; scans 0.98 to 1.03; gen:cylinders 0.63 and 0.64, gen:foliage
-// 0.52 and 0.54.
 constexpr AutoPrior kBonsaiSplitPrior{280.0, 450.0, 0.64, 0.53, 0.92, 1.07, 1.01};
-// The same tree as binned where its automatic SA_max does not split, so no candidate there; gen:cylinders 0.40 and
-// 0.42, gen:foliage 0.51 and 0.52.
+// The same tree as binned where its automatic SA_max does not split, so no candidate there.
 constexpr AutoPrior kEscPrior{160.0, 710.0, 0.41, 0.51, 1.0, 1.0, 1.0, 0.0, kEscMaxFillToSplit};
-// crytek-sponza 0.87; other architecture 0.96 to 1.05; scans 0.98 to 1.01; gen:cylinders 0.72 and 0.75, gen:foliage
-// 0.47 and 0.48. Where binned's tree is measured, auto predicts sbvh's frame from its overlap instead.
+// sbvh's build is binned's times the geometric mean of their ratio; where binned's tree is measured, auto predicts
+// sbvh's frame from its overlap instead.
 constexpr AutoPrior kSbvhPrior{570.0, 1750.0, 0.73, 0.47, 0.87, 1.0, 1.0};
-// Full sweeps instead of bins: 0.97 to 1.01 everywhere.
+// Full sweeps instead of bins: within a few percent of binned's frames everywhere.
 constexpr AutoPrior kSweepPrior{330.0, 330.0, 1.0, 1.0, 1.0, 1.0, 1.0};
-// crytek-sponza 0.85; other architecture 0.94 to 0.99; scans 1.02 to 1.07; gen:cylinders 0.73 and 0.83, gen:foliage
-// 0.85 and 0.91.
 constexpr AutoPrior kBittnerPrior{3300.0, 11000.0, 0.78, 0.88, 0.85, 0.96, 1.04};
-// lbvh's default, the direct wide tree from the Morton codes (its optimal collapse: architecture 1.10 to 1.28, scans
-// 1.06 to 1.12, slivers 1.36 and 1.49, overlapping instances 1.25, zoo-64's flattened scans, whose Morton order
-// interleaves the instances' triangles). The direct tree against binned, commit 1da3c4a: objects seen from outside
-// 1.05 to 1.25, geometric mean 1.12 (bunny, armadillo, dragon, gen:surface and the four unseen models, 1024 x 768);
-// rooms and cities 1.27 to 1.67 (crytek-sponza 1.37, sibenik 1.30, conference 1.54, gen:box 1.27, gen:city 1.67),
-// slivers 1.50 and 1.73 (512 x 384, docs/results.md); instances the collapse's prior times the rooms' 1.1. The
-// cheapest build (the direct tree: 0.37x to 0.61x the optimal collapse's, 1da3c4a), so it wins where a frame is
-// cheap against building.
+// lbvh's default, the direct wide tree from the Morton codes, a fraction of the optimal collapse's build; instances
+// (whose flattened Morton order interleaves the instances' triangles) the optimal collapse's prior times the rooms'
+// ratio to it. The cheapest build, so it wins where a frame is cheap against building.
 constexpr AutoPrior kLbvhPrior{45.0, 45.0, 1.6, 1.6, 1.4, 1.4, 1.12, 1.38};
 
 std::list<BuilderEntry> canopy_builders() {
@@ -260,6 +242,14 @@ double reference_cap_per_triangle(const std::string& builder) {
     for (const FamilyEntry& family : other_families())
         if (family.name == builder) return family.reference_cap;
     return 1.0;
+}
+
+BuildPlan make_build_plan(const std::string& spec, int width, bool two_level) {
+    BuildPlan plan{spec, width, two_level, reference_cap_per_triangle(spec_name(spec)), {}};
+    if (spec != "auto") return plan;
+    for (const BuilderEntry& candidate : builders())
+        if (candidate.auto_prior) plan.auto_candidates.push_back({candidate.name, width, false, candidate.reference_cap, {}});
+    return plan;
 }
 
 void check_builder_name(const std::string& spec) { parse_builder_spec(spec); }

@@ -2,8 +2,8 @@
 
 #include "accel/parallel.h"
 #include "accel/sah_binning.h"
-#include "accel/sparse_tree.h"
 #include "accel/spatial_binning.h"
+#include "accel/top_down_builder.h"
 #include "accel/triangle_clipping.h"
 
 #include <array>
@@ -22,8 +22,8 @@ using spatial_binning::AxisBins;
 using spatial_binning::SpatialAxis;
 
 // Spatial bins per axis. Clipping a reference into every bin it spans is the expensive part of SBVH: 12 bins on
-// each of the three axes, as Stich et al. bin them. On crytek-sponza the largest axis alone built 1.9x faster but
-// its trees tested 5% more nodes and 3% more leaves a ray (bvh8 frames 1.078x Embree HIGH's against 1.014x).
+// each of the three axes, as Stich et al. bin them, since the largest axis alone built faster but made trees that
+// rays visit more of, for slower frames (docs/results.md#builds-and-layouts).
 constexpr uint32_t kSpatialBins = spatial_binning::kMaxBins;
 constexpr size_t kParallelBinningGrain = sah_binning::kParallelGrain;
 constexpr size_t kParallelSubtreeGrain = 4 * 1024;
@@ -87,27 +87,66 @@ void spatial_sides(const SpatialAxis& bins, uint32_t n, Candidate& split) {
     split.right = right.box4().bbox();
 }
 
-class SbvhBuilder {
+// SBVH's search, for TopDownBuilder: the cheaper of the best binned object split and the best binned spatial split.
+// Its spatial splits add references: a node owns the slots of its extent, and the references it adds go there.
+class SbvhSearch {
 public:
-    SbvhBuilder(std::span<const Triangle> triangles, std::vector<PrimRef>& refs, const BuildSettings& settings,
-                const SbvhSettings& sbvh, float root_half_area)
+    struct Node {
+        Extent e;
+        NodeInfo info;  // filled in by prepare
+    };
+    struct Split {
+        sah_binning::BinMapping mapping;  // of the object split
+        Candidate object, spatial;
+        bool use_spatial;
+        float cost;  // the chosen candidate's
+        bool found() const { return (use_spatial ? spatial : object).axis >= 0; }
+    };
+    using Children = std::pair<Node, Node>;
+
+    SbvhSearch(std::span<const Triangle> triangles, std::vector<PrimRef>& refs, const BuildSettings& settings,
+               const SbvhSettings& sbvh, float root_half_area)
         : triangles_(triangles), refs_(refs), settings_(settings),
           object_bins_(std::clamp<uint32_t>(settings.bins, 2, sah_binning::kMaxBins)),
-          max_leaf_(std::max<uint32_t>(settings.max_leaf_size, 1)),
-          min_overlap_(sbvh.alpha * root_half_area), nodes_(refs.size()) {}
+          min_overlap_(sbvh.alpha * root_half_area) {}
 
-    Bvh build(uint32_t triangles) {
-        build_subtree({0, triangles, uint32_t(refs_.size())}, 0, 1, 0);
-        Bvh bvh;
-        bvh.nodes = nodes_.finish();
-        // The leaves' references sit in their subtrees' slots with gaps between; pack them, leaf by leaf.
-        for (BvhNode& node : bvh.nodes) {
-            if (!node.is_leaf()) continue;
-            const uint32_t first = uint32_t(bvh.refs.size());
-            for (uint32_t i = node.index; i < node.index + node.count; ++i) bvh.refs.push_back(refs_[i].prim);
-            node.index = first;
+    void prepare(Node& node) const { node.info = info_of(node.e); }
+    static uint32_t count(const Node& node) { return node.e.count; }
+    static uint32_t first(const Node& node) { return node.e.begin; }
+    static uint32_t slots(const Node& node) { return node.e.capacity; }
+    static BBox box(const Node& node) { return node.info.bounds.bbox(); }
+    static float half_area(const Node& node) { return node.info.bounds.half_area(); }
+    static bool leaf_without_search(const Node&) { return false; }
+
+    Split find(const Node& node) const {
+        const Extent& e = node.e;
+        const uint32_t n = e.count;
+        const sah_binning::BinMapping mapping(node.info.centroids, object_bins(n));
+        Candidate object = best_object_split(e, mapping);
+        Candidate spatial;
+        // Stich et al.: spatial splits only where the object split leaves overlap, and only within the memory cap.
+        BBox overlap = object.left;
+        overlap.lower = glm::max(overlap.lower, object.right.lower);
+        overlap.upper = glm::min(overlap.upper, object.right.upper);
+        if (e.capacity > n && (object.axis < 0 || overlap.half_area() > min_overlap_)) spatial = best_spatial_split(e, box(node));
+        const bool use_spatial = spatial.cost < object.cost && spatial.left_count + spatial.right_count - n <= e.capacity - n;
+        const float cost = use_spatial ? spatial.cost : object.cost;
+        return {mapping, object, spatial, use_spatial, cost};
+    }
+
+    // The spatial split where it leaves both sides references, else the object split, if any.
+    std::optional<Children> split(const Node& node, const Split& chosen) {
+        if (chosen.use_spatial) {
+            if (auto children = split_spatially(node.e, chosen.spatial, box(node))) return children;
         }
-        return bvh;
+        if (chosen.object.axis >= 0) return split_by_objects(node.e, chosen.object, chosen.mapping);
+        return std::nullopt;
+    }
+
+    // Coincident centroids, or too deep: the halves of the extent as it lies.
+    Children median(const Node& node) {
+        const uint32_t half = node.e.count / 2;
+        return children(node.e, half, node.e.count - half, true);
     }
 
 private:
@@ -129,37 +168,6 @@ private:
         return parallel::reduce(e.count, kParallelBinningGrain, none, chunk, join);
     }
 
-    // Returns how far past `descendants` its descendants reach (SparseTree::set_inner).
-    uint32_t build_subtree(const Extent& e, uint32_t node, uint32_t descendants, uint32_t depth) {
-        const NodeInfo info = info_of(e);
-        const BBox bounds = info.bounds.bbox();
-        const uint32_t n = e.count;
-        const float area = info.bounds.half_area();
-        if (n > 1 && depth < kMedianFallbackDepth) {
-            const sah_binning::BinMapping mapping(info.centroids, object_bins(n));
-            Candidate object = best_object_split(e, mapping);
-            Candidate spatial;
-            // Stich et al.: spatial splits only where the object split leaves overlap, and only within the memory cap.
-            BBox overlap = object.left;
-            overlap.lower = glm::max(overlap.lower, object.right.lower);
-            overlap.upper = glm::min(overlap.upper, object.right.upper);
-            if (e.capacity > n && (object.axis < 0 || overlap.half_area() > min_overlap_)) spatial = best_spatial_split(e, bounds);
-            const bool use_spatial = spatial.cost < object.cost && spatial.left_count + spatial.right_count - n <= e.capacity - n;
-            const Candidate& best = use_spatial ? spatial : object;
-            const float split_cost = settings_.costs.inner * area + settings_.costs.triangle * best.cost;
-            const bool leaf_is_cheaper = n <= max_leaf_ && settings_.costs.triangle * settings_.leaf_tests(n) * area <= split_cost;
-            if (best.axis >= 0 && !leaf_is_cheaper) {
-                if (use_spatial) {
-                    if (const auto used = split_spatially(e, spatial, bounds, node, descendants, depth)) return *used;
-                }
-                if (object.axis >= 0) return split_by_objects(e, object, mapping, bounds, node, descendants, depth);
-            }
-        }
-        if (n <= max_leaf_) return nodes_.set_leaf(node, bounds, e.begin, n);
-        const uint32_t half = n / 2;  // coincident centroids, or too deep
-        return emit_children(e, half, n - half, true, bounds, node, descendants, depth);
-    }
-
     // Binned SAH over the references' centroids, as the binned builder does (accel/sah_binning.h).
     uint32_t object_bins(uint32_t n) const { return sah_binning::object_bin_count(object_bins_, n); }
 
@@ -171,8 +179,9 @@ private:
     }
 
     // Stich et al.: spatial bins over the node's bounds on each axis, a reference that spans several chopped into
-    // them (accel/spatial_binning.h). The bins only price splits, so they are computed in float: exact clipping took
-    // 28% of a conference build, and the trees came out the same (split_spatially clips references exactly).
+    // them (accel/spatial_binning.h). The bins only price splits, so they are computed in float: exact clipping was
+    // a large share of a build, and the trees came out the same (split_spatially clips references exactly;
+    // docs/results.md#builds-and-layouts).
     // Small nodes get fewer: a bin per reference is enough.
     static uint32_t spatial_bins(uint32_t n) { return std::clamp<uint32_t>(n, 4, kSpatialBins); }
 
@@ -222,13 +231,12 @@ private:
         return best;
     }
 
-    uint32_t split_by_objects(const Extent& e, const Candidate& split, const sah_binning::BinMapping& mapping, const BBox& bounds, uint32_t node,
-                              uint32_t descendants, uint32_t depth) {
+    Children split_by_objects(const Extent& e, const Candidate& split, const sah_binning::BinMapping& mapping) {
         PrimRef* first = refs_.data() + e.begin;
         const sah_binning::BinMapping::Plane plane = mapping.plane(split.axis, split.plane);
         PrimRef* middle = std::partition(first, first + e.count, [&](const PrimRef& r) { return plane.left_of(r); });
         const auto left = uint32_t(middle - first);
-        return emit_children(e, left, e.count - left, true, bounds, node, descendants, depth);
+        return children(e, left, e.count - left, true);
     }
 
     enum class Side : uint8_t { left, right, both };
@@ -246,10 +254,9 @@ private:
     }
 
     // Partitions into [left only | straddling | right only], clips or places the straddling references and lays
-    // the two sides out in their extents. Returns how far past `descendants` its descendants reach, or nothing (refs
-    // only permuted) when a side would come out empty.
-    std::optional<uint32_t> split_spatially(const Extent& e, const Candidate& split, const BBox& bounds, uint32_t node,
-                                            uint32_t descendants, uint32_t depth) {
+    // the two sides out in their extents. Returns the children, or nothing (refs only permuted) when a side would
+    // come out empty.
+    std::optional<Children> split_spatially(const Extent& e, const Candidate& split, const BBox& bounds) {
         const AxisBins map(bounds.lower[split.axis], bounds.upper[split.axis], spatial_bins(e.count));
         const float position = map.plane(split.plane);
         PrimRef* first = refs_.data() + e.begin;
@@ -278,7 +285,7 @@ private:
         std::move_backward(right_only, end, refs_.data() + right_begin + right_count);
         std::copy(to_right.begin(), to_right.end(), refs_.data() + right_begin);
         std::copy(to_left.begin(), to_left.end(), straddling);
-        return emit_children(e, left_count, right_count, false, bounds, node, descendants, depth);
+        return children(e, left_count, right_count, false);
     }
 
     // The spare slots a subtree hands on, split in proportion to the children's references.
@@ -288,9 +295,9 @@ private:
     }
 
     // Children: the left side's references at e.begin, the right side's at the start of its extent, where
-    // they are moved when they still follow the left side's.
-    uint32_t emit_children(const Extent& e, uint32_t left, uint32_t right, bool right_follows_left, const BBox& bounds,
-                           uint32_t node, uint32_t descendants, uint32_t depth) {
+    // they are moved when they still follow the left side's. A subtree over an extent of c slots has at most c
+    // leaves, so the 2c - 2 tree slots TopDownBuilder reserves for its descendants suffice.
+    Children children(const Extent& e, uint32_t left, uint32_t right, bool right_follows_left) {
         const uint32_t left_capacity = left + left_share(e, left, right);
         const Extent le{e.begin, left, left_capacity};
         const Extent re{e.begin + left_capacity, right, e.capacity - left_capacity};
@@ -298,19 +305,28 @@ private:
             PrimRef* from = refs_.data() + e.begin + left;
             std::move_backward(from, from + right, refs_.data() + re.begin + right);
         }
-        // A subtree over an extent of c slots has at most c leaves, so 2c - 2 descendant slots suffice.
-        return nodes_.set_inner(node, bounds, descendants, le.capacity, e.count, kParallelSubtreeGrain,
-                                [&](uint32_t first) { return build_subtree(le, descendants, first, depth + 1); },
-                                [&](uint32_t first) { return build_subtree(re, descendants + 1, first, depth + 1); });
+        return {Node{le, {}}, Node{re, {}}};
     }
 
     std::span<const Triangle> triangles_;
     std::vector<PrimRef>& refs_;
     const BuildSettings& settings_;
-    const uint32_t object_bins_, max_leaf_;
+    const uint32_t object_bins_;
     const float min_overlap_;
-    SparseTree nodes_;
 };
+
+// The leaves' references sit in their subtrees' slots with gaps between; packs them, leaf by leaf.
+Bvh pack_leaves(BvhNodes&& nodes, const std::vector<PrimRef>& refs) {
+    Bvh bvh;
+    bvh.nodes = std::move(nodes);
+    for (BvhNode& node : bvh.nodes) {
+        if (!node.is_leaf()) continue;
+        const uint32_t first = uint32_t(bvh.refs.size());
+        for (uint32_t i = node.index; i < node.index + node.count; ++i) bvh.refs.push_back(refs[i].prim);
+        node.index = first;
+    }
+    return bvh;
+}
 
 }  // namespace
 
@@ -331,8 +347,10 @@ Bvh build_sbvh_with(BuildInput&& input, const BuildSettings& settings, const Sbv
     BuildSettings priced = settings;
     priced.leaf_block = std::max(sbvh.leaf_block, 1u);
     sah_binning::require_power_of_two_block(priced);
-    SbvhBuilder builder(input.triangles, input.refs, priced, sbvh, root.half_area());
-    Bvh bvh = builder.build(triangles);
+    SbvhSearch search(input.triangles, input.refs, priced, sbvh, root.half_area());
+    const TopDownLimits limits{std::max<uint32_t>(settings.max_leaf_size, 1), kMedianFallbackDepth, kParallelSubtreeGrain};
+    TopDownBuilder<SbvhSearch> builder(search, priced, limits, input.refs.size());
+    Bvh bvh = pack_leaves(builder.build(SbvhSearch::Node{Extent{0, triangles, uint32_t(input.refs.size())}, NodeInfo{Box4::empty(), Box4::empty()}}), input.refs);
     // Spatial splitting is interleaved with partitioning, not a pass of its own, so no split time is reported;
     // the capacity is the reference array allocated up front.
     bvh.split = {0.0, uint64_t(slots)};

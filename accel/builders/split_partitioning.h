@@ -5,7 +5,7 @@
 // the triangles that straddle the plane and keeps the halves where that lowers the cut's SAH cost. The refs grow
 // in place: each partition keeps free space behind it, shared out by size, and a right side that outgrows it
 // moves to a new region with 20% padding.
-#include "accel/geometry.h"
+#include "base/geometry.h"
 
 #include <memory>
 #include <span>

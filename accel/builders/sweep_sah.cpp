@@ -1,7 +1,7 @@
 #include "accel/builders/sweep_sah.h"
 
 #include "accel/parallel.h"
-#include "accel/sparse_tree.h"
+#include "accel/top_down_builder.h"
 
 #include <immintrin.h>
 #include <tbb/parallel_sort.h>
@@ -33,32 +33,75 @@ struct SweepBox {
     }
 };
 
-struct Split {
-    int axis = -1;
-    uint32_t position = 0;  // refs at [begin, position) of order[axis] go left
-    float cost = std::numeric_limits<float>::infinity();  // A_left T_left + A_right T_right, half areas
-};
-
-class SweepSahBuilder {
+// The full sweep (MacDonald and Booth, sec. 3) over three centroid orders kept by stable partitioning, for
+// TopDownBuilder.
+class SweepSahSearch {
 public:
-    SweepSahBuilder(std::span<const PrimRef> refs, const BuildSettings& settings, uint32_t median_depth)
-        : refs_(refs), settings_(settings), max_leaf_(std::max<uint32_t>(settings.max_leaf_size, 1)),
-          median_depth_(median_depth),
-          scratch_(refs.size()), right_area_(refs.size()), goes_left_(refs.size()), leaf_tests_(refs.size() + 1),
-          nodes_(refs.size()) {
+    struct Node {
+        uint32_t begin, end;  // positions in every order
+        BBox bounds;
+    };
+    struct Split {
+        int axis = -1;
+        uint32_t position = 0;  // refs at [begin, position) of order[axis] go left
+        float cost = std::numeric_limits<float>::infinity();  // A_left T_left + A_right T_right, half areas
+        bool found() const { return axis >= 0; }
+    };
+    using Children = std::pair<Node, Node>;
+
+    SweepSahSearch(std::span<const PrimRef> refs, const BuildSettings& settings)
+        : refs_(refs), scratch_(refs.size()), right_area_(refs.size()), goes_left_(refs.size()),
+          leaf_tests_(refs.size() + 1) {
         for (uint32_t n = 0; n < leaf_tests_.size(); ++n) leaf_tests_[n] = settings.leaf_tests(n);
         for (int axis = 0; axis < 3; ++axis) sort_by_centroid(axis);
     }
 
-    Bvh build() {
+    Node root() const {
         BBox bounds;
         for (const PrimRef& r : refs_) bounds.extend(r.bounds());
-        build_subtree(0, uint32_t(refs_.size()), bounds, 0, 1, 0);
-        Bvh bvh;
-        bvh.refs.resize(refs_.size());
-        parallel::for_each(refs_.size(), 64 * 1024, [&](size_t i) { bvh.refs[i] = refs_[order_[0][i]].prim; });
-        bvh.nodes = nodes_.finish();
-        return bvh;
+        return {0, uint32_t(refs_.size()), bounds};
+    }
+    // The prim of the ref at `position` once the tree is built: leaves index the first order.
+    uint32_t prim_at(size_t position) const { return refs_[order_[0][position]].prim; }
+
+    void prepare(Node&) const {}
+    static uint32_t count(const Node& node) { return node.end - node.begin; }
+    static uint32_t first(const Node& node) { return node.begin; }
+    static uint32_t slots(const Node& node) { return count(node); }
+    static BBox box(const Node& node) { return node.bounds; }
+    static float half_area(const Node& node) { return node.bounds.half_area(); }
+    static bool leaf_without_search(const Node&) { return false; }
+
+    // Right-to-left areas first, then left to right. No finite cost (box areas that overflow float, scenes
+    // beyond about 1e19) finds no split.
+    Split find(const Node& node) {
+        Split best;
+        for (int axis = 0; axis < 3; ++axis) {
+            const std::vector<uint32_t>& order = order_[axis];
+            SweepBox right;
+            for (uint32_t i = node.end; i-- > node.begin + 1;) {
+                right.extend(refs_[order[i]]);
+                right_area_[i] = right.half_area() * leaf_tests_[node.end - i];
+            }
+            SweepBox left;
+            for (uint32_t i = node.begin + 1; i < node.end; ++i) {
+                left.extend(refs_[order[i - 1]]);
+                const float cost = left.half_area() * leaf_tests_[i - node.begin] + right_area_[i];
+                if (cost < best.cost) best = {axis, i, cost};
+            }
+        }
+        return best;
+    }
+
+    std::optional<Children> split(const Node& node, const Split& chosen) {
+        partition(node.begin, node.end, chosen);
+        return Children{{node.begin, chosen.position, bounds_of(node.begin, chosen.position)},
+                        {chosen.position, node.end, bounds_of(chosen.position, node.end)}};
+    }
+
+    // Too deep, or no split found: the middle of the order on the node's largest axis.
+    Children median(const Node& node) {
+        return *split(node, {node.bounds.largest_axis(), node.begin + count(node) / 2, 0.0f});
     }
 
 private:
@@ -77,51 +120,6 @@ private:
         std::vector<uint32_t>& order = order_[axis];
         order.resize(refs_.size());
         for (uint32_t i = 0; i < order.size(); ++i) order[i] = keyed[i].second;
-    }
-
-    // The sweep (MacDonald and Booth, sec. 3): right-to-left areas first, then left to right.
-    Split best_split(uint32_t begin, uint32_t end) {
-        Split best;
-        for (int axis = 0; axis < 3; ++axis) {
-            const std::vector<uint32_t>& order = order_[axis];
-            SweepBox right;
-            for (uint32_t i = end; i-- > begin + 1;) {
-                right.extend(refs_[order[i]]);
-                right_area_[i] = right.half_area() * leaf_tests_[end - i];
-            }
-            SweepBox left;
-            for (uint32_t i = begin + 1; i < end; ++i) {
-                left.extend(refs_[order[i - 1]]);
-                const float cost = left.half_area() * leaf_tests_[i - begin] + right_area_[i];
-                if (cost < best.cost) best = {axis, i, cost};
-            }
-        }
-        return best;
-    }
-
-    // Returns how far past `descendants` its descendants reach (SparseTree::set_inner).
-    uint32_t build_subtree(uint32_t begin, uint32_t end, const BBox& bounds, uint32_t node, uint32_t descendants,
-                           uint32_t depth) {
-        const uint32_t n = end - begin;
-        if (n == 1) return nodes_.set_leaf(node, bounds, begin, n);
-        Split split;
-        if (depth < median_depth_) {
-            split = best_split(begin, end);
-            const float area = bounds.half_area();
-            const float split_cost = settings_.costs.inner * area + settings_.costs.triangle * split.cost;
-            if (n <= max_leaf_ && settings_.costs.triangle * settings_.leaf_tests(n) * area <= split_cost)
-                return nodes_.set_leaf(node, bounds, begin, n);
-        } else if (n <= max_leaf_) {
-            return nodes_.set_leaf(node, bounds, begin, n);
-        }
-        // Too deep, or no finite cost (box areas that overflow float, scenes beyond about 1e19): cut at the median.
-        if (split.axis < 0) split = {bounds.largest_axis(), begin + n / 2, 0.0f};
-        partition(begin, end, split);
-        const BBox left = bounds_of(begin, split.position), right = bounds_of(split.position, end);
-        return nodes_.set_inner(
-            node, bounds, descendants, split.position - begin, n, kParallelSubtreeGrain,
-            [&](uint32_t first) { return build_subtree(begin, split.position, left, descendants, first, depth + 1); },
-            [&](uint32_t first) { return build_subtree(split.position, end, right, descendants + 1, first, depth + 1); });
     }
 
     // Splits [begin, end) of every order at the split: the other two orders are partitioned stably by which
@@ -145,27 +143,34 @@ private:
     }
 
     std::span<const PrimRef> refs_;
-    const BuildSettings& settings_;
-    const uint32_t max_leaf_;
-    const uint32_t median_depth_;  // depth from which nodes are cut at the median
     std::array<std::vector<uint32_t>, 3> order_;
     std::vector<uint32_t> scratch_;    // by position: subtrees use disjoint ranges
     std::vector<float> right_area_;    // by position
     std::vector<uint8_t> goes_left_;   // by ref: subtrees hold disjoint refs
     std::vector<float> leaf_tests_;    // settings.leaf_tests(n) by n: the sweep asks for every n
-    SparseTree nodes_;
 };
+
+Bvh sweep_tree(std::span<const PrimRef> refs, const BuildSettings& settings, uint32_t median_depth) {
+    SweepSahSearch search(refs, settings);
+    const TopDownLimits limits{std::max<uint32_t>(settings.max_leaf_size, 1), median_depth, kParallelSubtreeGrain};
+    TopDownBuilder<SweepSahSearch> builder(search, settings, limits, refs.size());
+    Bvh bvh;
+    bvh.nodes = builder.build(search.root());
+    bvh.refs.resize(refs.size());
+    parallel::for_each(refs.size(), 64 * 1024, [&](size_t i) { bvh.refs[i] = search.prim_at(i); });
+    return bvh;
+}
 
 }  // namespace
 
 Bvh build_sweep_sah(BuildInput&& input, const BuildSettings& settings) {
     if (input.refs.empty()) return {};
-    return SweepSahBuilder(input.refs, settings, kMedianFallbackDepth).build();
+    return sweep_tree(input.refs, settings, kMedianFallbackDepth);
 }
 
 Bvh build_sweep_sah_subtree(std::span<const PrimRef> refs, const BuildSettings& settings, uint32_t median_depth) {
     if (refs.empty()) return {};
-    return SweepSahBuilder(refs, settings, median_depth).build();
+    return sweep_tree(refs, settings, median_depth);
 }
 
 }  // namespace canopy

@@ -45,7 +45,8 @@ struct AccelOptions {
     std::string toplevel = "flat";
     int threads = 0;  // for the build and batch queries; 0: all
     // bvh8 nodes: "standard" (256 bytes), or "compressed" (child boxes in bytes, 128 bytes a node, the same hits;
-    // measured 10 to 15% slower, for 7 to 8% less memory): a named builder, kernel bvh8 and a flat top level only.
+    // slower to trace, for less memory: docs/results.md#compressed-bvh8-nodes): a named builder, kernel bvh8 and a
+    // flat top level only.
     std::string layout = "standard";
     // How bvh4 and bvh8 are made: "" for the builder's own ("direct" for lbvh's flat trees, its wide tree straight
     // from the Morton codes, the fastest build; "optimal" for every other), or "optimal" (the least-cost collapse of

@@ -1,0 +1,9 @@
+// The path tracers over the width-8 kernels, compiled apart from the other widths'.
+#include "renderer/frames_of_width.h"
+
+namespace canopy {
+
+template uint64_t render_of_width<8>(const AnyKernel&, const FrameJob&);
+template uint64_t count_of_width<8>(const AnyKernel&, const FrameJob&, tbb::enumerable_thread_specific<TraversalCounts>&);
+
+}  // namespace canopy

@@ -1,0 +1,98 @@
+#pragma once
+// The path tracers over the kernels of one width, compiled in a translation unit of their own per width
+// (frames_bvh2.cpp, frames_bvh4.cpp, frames_bvh8.cpp; the kd-tree's with width 1), so that no one file compiles every
+// kernel's frames.
+#include "kernels/dispatch.h"
+#include "renderer/path_tracer.h"
+#include "renderer/wavefront.h"
+
+#include <tbb/enumerable_thread_specific.h>
+
+#include <stdexcept>
+#include <variant>
+
+namespace canopy {
+
+// What a frame call asks: the scene and its settings, the camera, the frame's number, the image and its progress.
+struct FrameJob {
+    const ShadingScene& scene;
+    const PinholeCamera& camera;
+    uint32_t frame;
+    Image& image;
+    const std::function<void(float)>& on_tile;
+};
+
+template <class Kernel>
+constexpr int width_of_kernel = 1;  // the kd-tree's
+template <class Layout, bool Robust, class Test>
+constexpr int width_of_kernel<BvhKernel<Layout, Robust, Test>> = Layout::kWidth;
+
+// The width of the kernel `kernel` holds (0 for none).
+inline int kernel_width_of(const AnyKernel& kernel) {
+    return std::visit([]<class Kernel>(const Kernel&) {
+        if constexpr (std::is_same_v<Kernel, std::monostate>) return 0;
+        else return width_of_kernel<Kernel>;
+    }, kernel);
+}
+
+// The stream tracer's view of a kernel: each bounce's batch in one call.
+template <class Kernel>
+struct BatchTracer {
+    using Scratch = typename Kernel::Scratch;
+    Kernel kernel;
+    BatchTraversal how;
+    void closest(std::span<const Ray> rays, std::span<Hit> hits, Scratch& scratch) const {
+        kernel.template batch<Query::Closest>(rays, hits, scratch, how);
+    }
+};
+
+// The single-ray tracer through the counting kernel, each thread adding to its own counts.
+template <class Kernel>
+struct CountingTracer {
+    Kernel kernel;
+    tbb::enumerable_thread_specific<TraversalCounts>& counts;
+    bool closest(const Ray& ray, Hit& hit) const { return kernel.query(ray, hit, counts.local()); }
+};
+
+// Calls f(kernel) for a kernel of width N; instantiated for each width in its own translation unit.
+template <int N, class F>
+uint64_t with_kernel_of_width(const AnyKernel& kernel, F&& f) {
+    return std::visit([&]<class Kernel>(const Kernel& k) -> uint64_t {
+        if constexpr (!std::is_same_v<Kernel, std::monostate> && width_of_kernel<Kernel> == N && is_compiled_kernel<Kernel>)
+            return f(k);
+        else
+            throw std::logic_error("a kernel reached the frames of another width");
+    }, kernel);
+}
+
+template <int N>
+uint64_t render_of_width(const AnyKernel& kernel, const FrameJob& job) {
+    return with_kernel_of_width<N>(kernel, [&]<class Kernel>(const Kernel& k) -> uint64_t {
+        if (job.scene.settings.tracer == TracerKind::Stream) {
+            if constexpr (Kernel::kStreams)
+                return render_frame_stream(BatchTracer<Kernel>{k, job.scene.settings.batch_traversal}, job.scene, job.camera,
+                                           job.frame, job.image, job.on_tile);
+            else
+                throw std::invalid_argument("layout 'compressed': the single-ray tracer only, not the stream tracer");
+        }
+        return render_frame(k, job.scene, job.camera, job.frame, job.image, job.on_tile);
+    });
+}
+
+template <int N>
+uint64_t count_of_width(const AnyKernel& kernel, const FrameJob& job, tbb::enumerable_thread_specific<TraversalCounts>& counts) {
+    return with_kernel_of_width<N>(kernel, [&]<class Kernel>(const Kernel& k) -> uint64_t {
+        return render_frame(CountingTracer<Kernel>{k, counts}, job.scene, job.camera, job.frame, job.image);
+    });
+}
+
+extern template uint64_t render_of_width<1>(const AnyKernel&, const FrameJob&);
+extern template uint64_t render_of_width<2>(const AnyKernel&, const FrameJob&);
+extern template uint64_t render_of_width<4>(const AnyKernel&, const FrameJob&);
+extern template uint64_t render_of_width<8>(const AnyKernel&, const FrameJob&);
+extern template uint64_t count_of_width<1>(const AnyKernel&, const FrameJob&, tbb::enumerable_thread_specific<TraversalCounts>&);
+extern template uint64_t count_of_width<2>(const AnyKernel&, const FrameJob&, tbb::enumerable_thread_specific<TraversalCounts>&);
+extern template uint64_t count_of_width<4>(const AnyKernel&, const FrameJob&, tbb::enumerable_thread_specific<TraversalCounts>&);
+extern template uint64_t count_of_width<8>(const AnyKernel&, const FrameJob&, tbb::enumerable_thread_specific<TraversalCounts>&);
+
+}  // namespace canopy
