@@ -1,10 +1,6 @@
 #include "accel/memory_budget.h"
 
-#include "accel/builder.h"
-#include "accel/builders/early_split_clipping.h"
-#include "accel/builders/presplit.h"
-#include "accel/builders/sbvh.h"
-#include "accel/builders/split_partitioning.h"
+#include "accel/builder.h"  // BuildSettings's leaf size: the header alone, not the registry
 #include "accel/bvh.h"
 #include "accel/kdtree.h"
 #include "accel/wide_bvh.h"
@@ -14,6 +10,7 @@
 #include <fstream>
 #include <initializer_list>
 #include <sstream>
+#include <string_view>
 #include <utility>
 
 namespace canopy {
@@ -71,36 +68,22 @@ constexpr uint64_t kKdTreeBytesPerReference = sizeof(KdBlock) + sizeof(uint32_t)
 // placement into a bounded number of them) with their share of top-level nodes.
 constexpr uint64_t kPlacementBytes = 1024;
 
-// Builders whose reference count grows beyond the triangle count, and the most slots they allocate per triangle.
-struct ReferenceCap {
-    const char* builder;
-    double per_triangle;
-};
-const ReferenceCap kReferenceCaps[] = {
-    {"sbvh", SbvhSettings{}.max_references_per_triangle},
-    {"presplit", 1.0 + PresplitSettings{}.budget},
-    {"esc", kMaxEscReferencesPerTriangle},
-    {"streelet", 1.3},      // streelet.cpp: a 30% pre-split quota
-    {"bonsai-split", kMaxReferenceCapacity},
-    {"sweep-presplit", kMaxReferenceCapacity},
-    {kKdTreeName, KdSettings{}.max_references_per_triangle},
-};
-
-// The builders `--builder auto` chooses from (engine/auto_builder.cpp): its estimate is the largest of theirs, plus
-// the largest layout again, as its calibration keeps the best tree so far while it builds the next.
-constexpr const char* kAutoCandidates[] = {"binned", "bonsai-split", "esc", "sbvh", "sweep", "bittner", "lbvh"};
+// The builder's name without its parameters ("sbvh" for "sbvh:alpha=1e-5").
+std::string_view builder_name(const BuildPlan& plan) {
+    return std::string_view(plan.builder).substr(0, plan.builder.find(':'));
+}
 
 MemoryEstimate build_terms(const SceneSize& size, const BuildPlan& plan) {
     MemoryEstimate e;
     const uint64_t triangles = plan.two_level ? size.triangles : size.instanced_triangles;
-    const auto references = uint64_t(double(triangles) * reference_cap_per_triangle(plan.builder)) + 1;
+    const auto references = uint64_t(double(triangles) * plan.reference_cap) + 1;
     if (plan.builder == "embree") {
         e.flat = triangles * kEmbreeCopyBytes;
         e.references = triangles * kEmbreeBuildBytes;
         e.layout = triangles * kEmbreeTreeBytes;
         return e;
     }
-    if (plan.builder == kKdTreeName) {  // no PrimRefs, binary BVH or wide layout
+    if (builder_name(plan) == kKdTreeName) {  // no PrimRefs, binary BVH or wide layout
         e.references = references * kKdBuildBytesPerReference;
         e.layout = references * kKdTreeBytesPerReference;
         return e;
@@ -121,8 +104,10 @@ MemoryEstimate plan_terms(const SceneSize& size, const BuildPlan& plan) {
     if (plan.builder != "auto") return build_terms(size, plan);
     MemoryEstimate largest = build_terms(size, {"binned", plan.width, true});
     uint64_t kept = largest.layout;
-    for (const char* candidate : kAutoCandidates) {
-        const MemoryEstimate e = build_terms(size, {candidate, plan.width, false});
+    // The largest of its candidates' builds, plus the largest layout again, as its calibration keeps the best tree
+    // so far while it builds the next.
+    for (const BuildPlan& candidate : plan.auto_candidates) {
+        const MemoryEstimate e = build_terms(size, candidate);
         if (e.total() > largest.total()) largest = e;
         kept = std::max(kept, e.layout);
     }
@@ -162,12 +147,6 @@ uint64_t resident_bytes() {
     uint64_t size = 0, resident = 0;
     in >> size >> resident;
     return resident * 4096;
-}
-
-double reference_cap_per_triangle(const std::string& builder) {
-    for (const ReferenceCap& cap : kReferenceCaps)
-        if (builder == cap.builder) return cap.per_triangle;
-    return 1.0;
 }
 
 MemoryEstimate estimate_memory(const SceneSize& size, std::span<const BuildPlan> plans) {

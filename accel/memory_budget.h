@@ -9,14 +9,19 @@
 #include <span>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 namespace canopy {
 
 // One accelerator to be built over the scene.
 struct BuildPlan {
-    std::string builder = "binned";  // a registered builder, "auto", or "embree"
+    std::string builder = "binned";  // a registered builder's spec, "auto", or "embree"
     int width = 8;                   // of the traversal layout: 2, 4 or 8
     bool two_level = false;          // a two-level or rebraided top level over object trees
+    // PrimRef slots the builder allocates per triangle at most: filled from its registry entry by make_build_plan
+    // (accel/builder.h), as this file is also built without the builders.
+    double reference_cap = 1.0;
+    std::vector<BuildPlan> auto_candidates;  // for "auto": the builds it may choose between
 };
 
 // Bytes, by what holds them, at the build's peak as the builders' leaf policies and the layouts' bytes per triangle
@@ -36,9 +41,6 @@ struct MemoryEstimate {
     uint64_t total() const { return process + scene + flat + references + binary + layout + frames; }
     std::string describe() const;  // "61.3 GiB (scene 17.9 GiB, flat 14.9 GiB, ...)"
 };
-
-// PrimRef slots a builder allocates per triangle at most (sbvh 2, presplit 1.5, ...); 1 for builders that do not split.
-double reference_cap_per_triangle(const std::string& builder);
 
 // The scene counted once; each plan's trees (binary BVH, layout) summed, as the bench keeps every row's accelerator
 // alive; the largest plan's PrimRefs and build scratch, as rows build one after another and free them.

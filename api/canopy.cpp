@@ -300,7 +300,11 @@ AccelStats Accel::stats(bool with_epo) const {
 
 std::vector<BuilderDescription> registered_builders() {
     std::vector<BuilderDescription> out;
-    for (const BuilderName& entry : all_builders()) out.push_back({entry.name, entry.description});
+    for (const BuilderName& entry : all_builders()) {
+        BuilderDescription& d = out.emplace_back(BuilderDescription{entry.name, entry.description, {}});
+        if (!is_bvh_builder(entry.name)) continue;
+        for (const BuilderParam& p : find_builder(entry.name).params) d.params.push_back({p.key, p.default_value, p.help});
+    }
     return out;
 }
 

@@ -65,7 +65,7 @@ void prepare_render(RenderOptions& o, PreparedRender& p) {
     check_blas_builder(o.blas_builder, {o.toplevel});
     if (!o.blas_builder.empty()) o.builder = o.blas_builder;  // a two-level render has no flat BVH
     const BuildPlan plan = o.accel == "embree" ? BuildPlan{"embree", 8, false}
-                                               : BuildPlan{o.builder, kernel_width(o.kernel), o.toplevel != "flat"};
+                                               : make_build_plan(o.builder, kernel_width(o.kernel), o.toplevel != "flat");
     p.scene = load_scene_within_memory(o.scene, {&plan, 1}, frame_bytes(o.size[0], o.size[1], 1, o.tracer == "stream", o.stream_paths),
                                        o.memory_limit);
     p.flat = flatten(p.scene);

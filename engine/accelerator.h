@@ -70,7 +70,7 @@ public:
 };
 
 struct CanopyOptions {
-    std::string builder = "binned";
+    std::string builder = "binned";  // a builder spec with its parameters, "sbvh:alpha=1e-5" (accel/builder.h)
     std::string start;  // optimisers: the builder of the start tree ("" for the optimiser's default)
     std::string kernel = "auto";  // bvh2, bvh4, bvh8, or auto: the widest this build and CPU run
     bool robust = true;      // robust traversal (Ize 2013); false is the measured fast mode
@@ -91,8 +91,6 @@ struct CanopyOptions {
     std::optional<uint64_t> permute_nodes;
     // rebraid: open BRefs wider than this share of their segment's largest extent (Benthin et al. 2017, sec. 4.2).
     float rebraid_threshold = TwoLevelSettings{}.open_extent;
-    SaMax esc_sa_max;  // builder "esc": SA_max of early split clipping (accel/builder.h)
-    float sbvh_alpha = kSbvhAlpha;  // builder "sbvh": its alpha (accel/builder.h)
 };
 
 // Throws std::invalid_argument for an unknown builder or kernel, or a two-level top level (it needs the scene).

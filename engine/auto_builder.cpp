@@ -103,16 +103,12 @@ SceneStatistics scene_statistics(const Scene& scene, const FlatScene& flat, doub
 
 namespace {
 
-// A candidate's prior: build time per triangle built, and frame time relative to binned SAH's as a function of the
-// scene's statistics, fitted on bench runs of every candidate over the shared scenes and the procedural classes
-// (docs/results.md#autos-priors-and-samples), so the priors have seen those scenes: they only order the calibration
-// and predict the candidates it does not measure.
-struct Prior {
-    const char* builder;
-    const char* toplevel;
-    double build_ns_per_triangle;         // on scenes without slivers
-    double sliver_build_ns_per_triangle;  // where splitting builders split (gen:cylinders, gen:foliage)
-    double (*relative_frame)(const SceneStatistics&);
+// A candidate: a builder under a top level, with its prior (accel/builder.h's AutoPrior). The flat candidates are
+// the registered builders with a prior, which say where they were fitted.
+struct Candidate {
+    std::string builder;
+    std::string toplevel;
+    AutoPrior prior;
 };
 
 // Scenes whose triangle boxes are this much larger than the triangles are made of long diagonal slivers, the only
@@ -142,16 +138,12 @@ bool crossing_slivers(const SceneStatistics& s) {
     return slivers(s) && s.reducible_cover > kCrossingCover * std::pow(double(s.unique_triangles), kCrossingCoverExponent);
 }
 
-// Frame priors relative to binned's by scene class: each is about the middle of what the builder's frames measured
-// in that class (docs/results.md#autos-priors-and-samples).
-double same_as_binned(const SceneStatistics&) { return 1.0; }
-double bonsai_split_frame(const SceneStatistics& s) {
-    return crossing_slivers(s) ? 0.64 : slivers(s) ? 0.53 : dense_boxes(s) ? 0.92 : architecture(s) ? 1.07 : 1.01;
-}
-// The same tree as binned where its automatic SA_max does not split.
-double esc_frame(const SceneStatistics& s) { return crossing_slivers(s) ? 0.41 : slivers(s) ? 0.51 : 1.0; }
-double sbvh_frame(const SceneStatistics& s) {
-    return crossing_slivers(s) ? 0.73 : slivers(s) ? 0.47 : dense_boxes(s) ? 0.87 : 1.0;
+// A prior's frame relative to binned's on a scene of this class.
+double relative_frame(const AutoPrior& p, const SceneStatistics& s) {
+    if (p.instanced > 0.0 && instanced(s)) return p.instanced;
+    if (crossing_slivers(s)) return p.crossing_slivers;
+    if (slivers(s)) return p.clustered_slivers;
+    return dense_boxes(s) ? p.dense_boxes : architecture(s) ? p.architecture : p.other;
 }
 // Where binned's tree is measured, its sibling overlap o (accel/metrics.h) predicts sbvh's gain better than the class:
 // what object splits could not separate is what spatial splits may. A least-squares line over the scenes above the
@@ -159,37 +151,21 @@ double sbvh_frame(const SceneStatistics& s) {
 // (docs/results.md#autos-priors-and-samples); floored at crytek-sponza's gain, the largest fitted; sliver fields keep
 // their class priors, as theirs lie off the line.
 constexpr double kSbvhOverlapOnset = 0.17, kSbvhOverlapGain = 3.8, kSbvhFrameFloor = 0.83;
-// Full sweeps instead of bins: within a few percent of binned's frames everywhere.
-double sweep_frame(const SceneStatistics&) { return 1.0; }
-double bittner_frame(const SceneStatistics& s) {
-    return crossing_slivers(s) ? 0.78 : slivers(s) ? 0.88 : dense_boxes(s) ? 0.85 : architecture(s) ? 0.96 : 1.04;
-}
-// lbvh's default, the direct wide tree from the Morton codes: its frames against binned's by class, instances (whose
-// flattened Morton order interleaves the instances' triangles) the optimal collapse's prior times the rooms' ratio to
-// it (docs/results.md#autos-priors-and-samples). The cheapest build, so it wins where a frame is cheap against
-// building.
-double lbvh_frame(const SceneStatistics& s) {
-    return instanced(s) ? 1.38 : slivers(s) ? 1.6 : architecture(s) ? 1.4 : 1.12;
-}
 // rebraid's traversal against flat's, as measured on zoo-64 (docs/results.md#autos-priors-and-samples). Plain
-// two-level builds in the same time and traces slower, so it is no candidate.
-double rebraid_frame(const SceneStatistics&) { return 1.3; }
+// two-level builds in the same time and traces slower, so it is no candidate. Instanced objects: each unique triangle
+// is built once, at a cost per unique triangle measured on zoo-64; a higher prior had scaled every flat build down once
+// rebraid was measured.
+constexpr AutoPrior kRebraidPrior{160.0, 160.0, 1.3, 1.3, 1.3, 1.3, 1.3};
 
-// Builds, ns a triangle, from the validation runs, scaled by each builder's later measured speed-ups where it got
-// faster; sbvh's is binned's times the geometric mean of their ratio (docs/results.md#autos-priors-and-samples).
-constexpr Prior kPriors[] = {
-    {"binned", "flat", 145.0, 145.0, &same_as_binned},
-    {"bonsai-split", "flat", 280.0, 450.0, &bonsai_split_frame},
-    {"esc", "flat", 160.0, 710.0, &esc_frame},
-    {"sbvh", "flat", 570.0, 1750.0, &sbvh_frame},
-    {"sweep", "flat", 330.0, 330.0, &sweep_frame},
-    {"bittner", "flat", 3300.0, 11000.0, &bittner_frame},
-    {"lbvh", "flat", 45.0, 45.0, &lbvh_frame},  // the direct tree, a fraction of the optimal collapse's build
-    // Instanced objects: each unique triangle is built once, at a cost per unique triangle measured on zoo-64; a
-    // higher prior had scaled every flat build down once rebraid was measured
-    // (docs/results.md#autos-priors-and-samples).
-    {"binned", "rebraid", 160.0, 160.0, &rebraid_frame},
-};
+// The registered builders with a prior, flat, then binned under a re-braided top level.
+std::vector<Candidate> candidates() {
+    std::vector<Candidate> out;
+    for (const BuilderEntry& entry : builders())
+        if (entry.auto_prior) out.push_back({entry.name, "flat", *entry.auto_prior});
+    out.push_back({"binned", "rebraid", kRebraidPrior});
+    return out;
+}
+
 // Frame time per pixel with binned, 2 threads, bvh8, by class: rooms seen from inside, slivers crossing the scene and
 // clustered ones (giving clustered slivers the crossing ones' cost made auto build sbvh first for a one-frame foliage
 // image). Objects seen from outside cost by what of the frame they cover: a pixel that misses all, plus a least-squares
@@ -208,10 +184,10 @@ double frame_ns_per_pixel(const SceneStatistics& s) {
 double prior_frame_ms(const SceneStatistics& s, uint64_t pixels, double relative) {
     return double(pixels) * frame_ns_per_pixel(s) * 1e-6 * relative;
 }
-bool allowed(const Prior& p, const SceneStatistics& stats) {
-    // Where its automatic SA_max splits nothing, esc builds binned's very tree: measuring it would be waste.
-    if (std::string(p.builder) == "esc" && stats.box_fill >= kEscMaxFillToSplit) return false;
-    const bool two_level = std::string(p.toplevel) != "flat";
+bool allowed(const Candidate& c, const SceneStatistics& stats) {
+    // A prior may stop at a box fill: from it up, esc's automatic SA_max splits nothing and esc builds binned's tree.
+    if (stats.box_fill >= c.prior.max_box_fill) return false;
+    const bool two_level = c.toplevel != "flat";
     if (two_level) return instanced(stats);  // two-level only with instances
     return flat_candidates(stats.triangles, stats.unique_triangles);
 }
@@ -259,13 +235,14 @@ double sbvh_frame_from_overlap(double overlap) {
 
 std::vector<CandidateEstimate> prior_estimates(const SceneStatistics& stats, int frames, uint64_t pixels) {
     std::vector<CandidateEstimate> out;
-    for (const Prior& p : kPriors) {
-        if (!allowed(p, stats)) continue;
-        const bool two_level = std::string(p.toplevel) != "flat";
+    for (const Candidate& candidate : candidates()) {
+        if (!allowed(candidate, stats)) continue;
+        const AutoPrior& p = candidate.prior;
+        const bool two_level = candidate.toplevel != "flat";
         const double built = double(two_level ? stats.unique_triangles : stats.triangles);
-        CandidateEstimate c{p.builder, p.toplevel};
+        CandidateEstimate c{candidate.builder, candidate.toplevel};
         c.build_ms = built * (slivers(stats) ? p.sliver_build_ns_per_triangle : p.build_ns_per_triangle) * 1e-6;
-        c.frame_ms = prior_frame_ms(stats, pixels, p.relative_frame(stats));
+        c.frame_ms = prior_frame_ms(stats, pixels, relative_frame(p, stats));
         out.push_back(c);
     }
     std::stable_sort(out.begin(), out.end(), [&](const CandidateEstimate& a, const CandidateEstimate& b) {

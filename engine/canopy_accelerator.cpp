@@ -70,26 +70,26 @@ class CanopyAccelerator final : public Accelerator {
 public:
     // `objects` is the scene whose objects and instances a two-level top level is built over; null for flat.
     CanopyAccelerator(const Scene* objects, const FlatScene& scene, const CanopyOptions& options)
-        : scene_(scene), options_(options), builder_(find_builder(options.builder)), width_(kernel_width(options.kernel)),
+        : scene_(scene), options_(options), spec_(parse_builder_spec(options.builder)),
+          builder_(find_builder(spec_.name)), width_(kernel_width(options.kernel)),
           collapse_(collapse_of(options)) {
         // SAH charges a leaf one test per 4 triangles for the SIMD kernels although they test 8 at once, and allows
         // leaves of two blocks where SAH prefers them to a split: both traced and built faster than leaves charged
         // per 8 or capped at 8 (docs/results.md#leaf-sizes-of-the-simd-kernels).
         if (width_ > 2) settings_.leaf_block = 4, settings_.max_leaf_size = 16;
-        settings_.esc_sa_max = options.esc_sa_max;
-        settings_.sbvh_alpha = options.sbvh_alpha;
+        settings_.params = spec_.params;
         if (!options.start.empty()) {
             if (!builder_.default_start)
                 throw std::invalid_argument("--start " + options.start + ": builder '" + builder_.name +
                                             "' is not an optimiser and takes no start tree");
-            find_builder(options.start);
+            find_builder(parse_builder_spec(options.start).name);
             settings_.start = options.start;
         }
         if (options.toplevel != "flat") {
             if (options.permute_nodes) throw std::invalid_argument("permuted nodes: flat trees only, not top level '" + options.toplevel + "'");
             two_level_settings_.top = parse_top_level(options.toplevel);
             if (!objects) throw std::invalid_argument("top level '" + options.toplevel + "' needs the scene's objects");
-            two_level_settings_.blas_builder = options.builder;
+            two_level_settings_.blas_builder = spec_.name;
             two_level_settings_.blas = settings_;
             two_level_settings_.collapse = collapse_;
             if (!(options.rebraid_threshold >= 0.0f && options.rebraid_threshold <= 1.0f))
@@ -104,7 +104,7 @@ public:
     std::string builder() const override {
         const std::string name = builder_.default_start
                                      ? builder_.name + "<" + (settings_.start.empty() ? builder_.default_start : settings_.start)
-                                     : builder_.name + esc_suffix();
+                                     : spec_.text();
         if (!two_level_input_) return name;
         return top_level_name() + "/" + name;
     }
@@ -121,10 +121,6 @@ public:
             case CollapseMethod::Direct: return " direct";
             default: return "";
         }
-    }
-    // "@8x" for early split clipping at another SA_max than the automatic one.
-    std::string esc_suffix() const {
-        return settings_.esc_sa_max == SaMax{} ? "" : "@" + sa_max_name(settings_.esc_sa_max);
     }
     // "rebraid@5%" for a re-braided top level with another than the paper's opening threshold.
     std::string top_level_name() const {
@@ -287,6 +283,7 @@ private:
 
     const FlatScene& scene_;
     CanopyOptions options_;
+    const BuilderSpec spec_;
     const BuilderEntry& builder_;
     const int width_;
     const CollapseMethod collapse_;
@@ -437,16 +434,6 @@ struct FamilyFactory {
 };
 constexpr FamilyFactory kFamilies[] = {{kKdTreeName, &make_kd_accelerator}};
 
-// Options of one builder given to another are refused, not ignored.
-void check_builder_options(const CanopyOptions& options) {
-    if (options.esc_sa_max != SaMax{} && options.builder != "esc")
-        throw std::invalid_argument("SA_max " + sa_max_name(options.esc_sa_max) + ": builder 'esc' only, not '" + options.builder + "'");
-    if (options.sbvh_alpha != kSbvhAlpha && options.builder != "sbvh")
-        throw std::invalid_argument("sbvh alpha " + std::to_string(options.sbvh_alpha) + ": builder 'sbvh' only, not '" + options.builder + "'");
-    if (!(options.sbvh_alpha >= 0.0f) || !std::isfinite(options.sbvh_alpha))
-        throw std::invalid_argument("sbvh alpha " + std::to_string(options.sbvh_alpha) + ": a share of the root's area, finite and >= 0");
-}
-
 std::unique_ptr<Accelerator> make_family_accelerator(const FlatScene& flat, const CanopyOptions& options) {
     for (const FamilyFactory& family : kFamilies)
         if (options.builder == family.name) return family.make(flat, options);
@@ -515,7 +502,7 @@ TwoLevelInput two_level_input(const Scene& scene) {
 }
 
 std::unique_ptr<Accelerator> make_canopy_accelerator(const FlatScene& scene, const CanopyOptions& options) {
-    check_builder_options(options);
+    if (options.builder != "auto") check_builder_name(options.builder);  // unknown names and parameters
     check_layout_options(options);
     if (options.builder == "auto") throw std::invalid_argument("builder 'auto' needs the scene's objects and instances");
     if (auto family = make_family_accelerator(scene, options)) return family;
@@ -523,7 +510,7 @@ std::unique_ptr<Accelerator> make_canopy_accelerator(const FlatScene& scene, con
 }
 
 std::unique_ptr<Accelerator> make_canopy_accelerator(const Scene& scene, const FlatScene& flat, const CanopyOptions& options) {
-    check_builder_options(options);
+    if (options.builder != "auto") check_builder_name(options.builder);  // unknown names and parameters
     check_layout_options(options);
     if (options.builder == "auto") {
         if (options.toplevel != "flat") throw std::invalid_argument("builder 'auto' chooses the top level itself: drop --toplevel");

@@ -8,9 +8,12 @@
 namespace canopy {
 
 std::string builder_names() {
-    std::string names;
-    for (const BuilderName& b : all_builders()) names += (names.empty() ? "" : ", ") + b.name;
-    return names + ", or auto (candidates built and timed on a sample of the frame, for --frames-planned)";
+    std::string names = "a name, or NAME:key=value,key=value with its parameters";
+    for (const BuilderName& b : all_builders()) {
+        names += "\n  " + b.name + ": " + b.description;
+        if (is_bvh_builder(b.name)) names += builder_params_help(find_builder(b.name));
+    }
+    return names + "\n  auto: candidates built and timed on a sample of the frame, for --frames-planned";
 }
 
 void check_blas_builder(const std::string& blas, const std::vector<std::string>& toplevels) {
@@ -19,7 +22,7 @@ void check_blas_builder(const std::string& blas, const std::vector<std::string>&
         throw std::invalid_argument("--blas-builder " + blas + ": only --toplevel two-level or rebraid has object BVHs");
     if (blas == "auto") throw std::invalid_argument("--blas-builder auto: auto chooses a whole accelerator, not an object BVH builder");
     try {
-        find_builder(blas);
+        find_builder(parse_builder_spec(blas).name);
     } catch (const std::invalid_argument& e) {
         throw std::invalid_argument(std::string("--blas-builder: ") + e.what());
     }

@@ -2,6 +2,7 @@
 #include "experiments/embree_accelerator.h"
 
 #include "accel/builder.h"
+#include "accel/builders/early_split_clipping.h"
 #include "kernels/dispatch.h"
 #include "renderer/frames.h"
 #include "renderer/distributed.h"
@@ -60,8 +61,7 @@ struct Entry {
     std::optional<TraversalCounts> visits;  // canopy: the first timed frame's rays through the counting kernel
     uint64_t counted_rays = 0;
     std::optional<float> rebraid_threshold;  // canopy's rebraid rows
-    std::optional<std::string> esc_sa_max;   // canopy's esc rows
-    std::optional<float> sbvh_alpha;         // canopy's sbvh rows
+    nlohmann::json builder_params;           // canopy's rows of a named builder: each parameter's value
 
     double build_min() const { return *std::min_element(build_ms.begin(), build_ms.end()); }
     double frame_mean() const { return mean(frame_ms); }
@@ -107,7 +107,7 @@ std::vector<Entry> rows_per_tracer(std::vector<Entry> accelerators, const BenchO
             for (const std::string& batch : tracer == TracerKind::Stream ? ways : std::vector<std::string>{""}) {
                 Entry row;
                 row.accel = a.accel;
-                row.rebraid_threshold = a.rebraid_threshold, row.esc_sa_max = a.esc_sa_max, row.sbvh_alpha = a.sbvh_alpha;
+                row.rebraid_threshold = a.rebraid_threshold, row.builder_params = a.builder_params;
                 row.tracer = tracer;
                 row.batch = ways.size() > 1 ? batch : "";
                 if (canopy && !batch.empty()) row.settings.batch_traversal = parse_batch_traversal(batch);
@@ -125,7 +125,7 @@ bool builds_its_accelerator(const std::vector<Entry>& entries, size_t i) {
 
 // --start applies to the optimisers in a bench; plain builders in the same run ignore it.
 std::string optimiser_start(const std::string& builder, const std::string& start) {
-    return is_bvh_builder(builder) && find_builder(builder).default_start ? start : "";
+    return is_bvh_builder(spec_name(builder)) && find_builder(spec_name(builder)).optimiser() ? start : "";
 }
 
 // "2 threads", "1 thread" or "all threads" (0).
@@ -139,12 +139,16 @@ std::vector<float> rebraid_thresholds_of(const std::string& toplevel, const Benc
     return toplevel == "rebraid" ? o.rebraid_thresholds : std::vector<float>{TwoLevelSettings{}.open_extent};
 }
 
-// The SA_max values of a builder's rows: esc's list, one (automatic) row for the others.
-std::vector<SaMax> sa_max_values_of(const std::string& builder, const BenchOptions& o) {
-    if (builder != "esc") return {SaMax{}};
-    std::vector<SaMax> values;
-    for (const std::string& text : o.esc_sa_max) values.push_back(parse_sa_max(text));
-    return values;
+// Every parameter of a BVH builder's spec with its value, the defaults included; {} for other families.
+nlohmann::json builder_params_json(const std::string& spec) {
+    const BuilderSpec parsed = parse_builder_spec(spec);
+    nlohmann::json params = nlohmann::json::object();
+    if (!is_bvh_builder(parsed.name)) return params;
+    for (const BuilderParam& p : find_builder(parsed.name).params) {
+        const std::string* value = parsed.params.find(p.key);
+        params[p.key] = value ? *value : p.default_value;
+    }
+    return params;
 }
 
 std::vector<Entry> make_entries(const Scene& scene, const FlatScene& flat, const BenchOptions& o, int threads) {
@@ -166,7 +170,7 @@ std::vector<Entry> make_entries(const Scene& scene, const FlatScene& flat, const
                             if (collapse == "direct" && (builder != "lbvh" || toplevel != "flat") && o.collapses.size() > 1) continue;
                             // Another structure family (the kd-tree) has one kernel: one row, not one per BVH kernel,
                             // traversal mode or collapse.
-                            const bool bvh = builder == "auto" || is_bvh_builder(builder);
+                            const bool bvh = builder == "auto" || is_bvh_builder(spec_name(builder));
                             if (!bvh && (kernel != o.kernels.front() || traversal != o.traversals.front() ||
                                          collapse != o.collapses.front() || layout != o.layouts.front()))
                                 continue;
@@ -175,15 +179,12 @@ std::vector<Entry> make_entries(const Scene& scene, const FlatScene& flat, const
                             if (!collapse.empty()) options.collapse = parse_collapse_method(collapse);
                             options.layout = parse_node_layout(layout);
                             if (builder != "auto") {
-                                for (const float threshold : rebraid_thresholds_of(toplevel, o))
-                                    for (const SaMax sa_max : sa_max_values_of(builder, o)) {
-                                        options.rebraid_threshold = threshold, options.esc_sa_max = sa_max;
-                                        if (builder == "sbvh") options.sbvh_alpha = o.sbvh_alpha;
-                                        entries.push_back({make_canopy_accelerator(scene, flat, options)});
-                                        if (toplevel == "rebraid") entries.back().rebraid_threshold = threshold;
-                                        if (builder == "esc") entries.back().esc_sa_max = sa_max_name(sa_max);
-                                        if (builder == "sbvh") entries.back().sbvh_alpha = o.sbvh_alpha;
-                                    }
+                                for (const float threshold : rebraid_thresholds_of(toplevel, o)) {
+                                    options.rebraid_threshold = threshold;
+                                    entries.push_back({make_canopy_accelerator(scene, flat, options)});
+                                    if (toplevel == "rebraid") entries.back().rebraid_threshold = threshold;
+                                    entries.back().builder_params = builder_params_json(builder);
+                                }
                                 continue;
                             }
                             if (toplevel != o.toplevels.front()) continue;  // auto chooses the top level itself
@@ -330,8 +331,7 @@ nlohmann::json results_json(const std::vector<Entry>& entries, uint64_t tris) {
                            {"tracer", tracer_name(e.tracer)},
                            {"threads", e.threads},
                            {"rebraid_threshold", or_null(e.rebraid_threshold)},
-                           {"esc_sa_max", or_null(e.esc_sa_max)},
-                           {"sbvh_alpha", or_null(e.sbvh_alpha)},
+                           {"builder_params", e.builder_params},
                            {"batch_traversal", e.tracer != TracerKind::Stream ? nlohmann::json(nullptr)
                                                : canopy ? nlohmann::json(batch_traversal_name(e.settings.batch_traversal))
                                                : nlohmann::json(e.settings.embree_packets ? "rtcIntersect16" : "rtcIntersect1M")},
@@ -618,7 +618,8 @@ struct BenchCommand {
     std::vector<std::string> scenes, accels, qualities{"medium"};
     std::string dynamic;
     std::vector<int> size{1024, 768};
-    CLI::Option *dynamic_option = nullptr, *rebraid_option = nullptr, *sa_max_option = nullptr, *alpha_option = nullptr;
+    std::vector<std::string> esc_area_limits, alpha_values;  // the --esc-sa-max and --sbvh-alpha aliases' values
+    CLI::Option *dynamic_option = nullptr, *rebraid_option = nullptr, *esc_option = nullptr, *alpha_option = nullptr;
 };
 
 // Options that take each value once, for a row each or the whole run.
@@ -631,14 +632,10 @@ void add_row_options(CLI::App& bench, BenchCommand& c) {
     c.rebraid_option = bench.add_option("--rebraid-threshold", b.rebraid_thresholds,
                       "Rebraid rows: open BRefs wider than this share of their segment's extent, 0 to 1 (sec. 4.2); a row each")
         ->delimiter(',')->check(CLI::Range(0.0, 1.0))->capture_default_str();
-    c.sa_max_option = bench.add_option("--esc-sa-max", b.esc_sa_max,
-                      "esc rows: SA_max of early split clipping, a row each: auto, a box area (12.5) or a multiple of the "
-                      "median ideal triangle area (8x)")
-        ->delimiter(',')->capture_default_str();
-    c.alpha_option = bench.add_option("--sbvh-alpha", b.sbvh_alpha,
-                      "sbvh rows: spatial splits only where object splits overlap by more than this share of the root's "
-                      "area (Stich et al. 2009 and the quality-metrics paper: 1e-5)")
-        ->check(CLI::NonNegativeNumber)->capture_default_str();
+    c.esc_option = bench.add_option("--esc-sa-max", c.esc_area_limits,
+                      "esc rows, a row each: --builder esc:sa_max=VALUE for each value")->delimiter(',');
+    c.alpha_option = bench.add_option("--sbvh-alpha", c.alpha_values,
+                      "sbvh rows, a row each: --builder sbvh:alpha=VALUE for each value")->delimiter(',');
     bench.add_option("--blas-builder", b.blas_builders,
                       "Two-level top levels: builders of the object BVHs, a row each (default: the --builder list)")
         ->delimiter(',');
@@ -692,6 +689,26 @@ void add_protocol_options(CLI::App& bench, BenchCommand& c) {
 
 bool contains_name(const std::vector<std::string>& list, const char* name) { return std::find(list.begin(), list.end(), name) != list.end(); }
 
+// The flags from before builders took parameters, `--esc-sa-max 8x,auto` and `--sbvh-alpha 1e-5`: each plain
+// `builder` in the builder lists becomes one spec per value ("esc:sa_max=8x", a row each).
+void apply_param_alias(const std::string& flag, const std::string& builder, const std::string& key,
+                       const std::vector<std::string>& values, BenchOptions& b) {
+    bool used = false;
+    for (std::vector<std::string>* list : {&b.builders, &b.blas_builders}) {
+        std::vector<std::string> specs;
+        for (const std::string& spec : *list) {
+            if (spec != builder) {
+                specs.push_back(spec);
+                continue;
+            }
+            for (const std::string& value : values) specs.push_back(builder + ":" + key + "=" + value);
+            used = true;
+        }
+        *list = specs;
+    }
+    if (!used) throw std::invalid_argument(flag + ": only with --builder " + builder);
+}
+
 // The parsed values as BenchOptions, refused (on every rank) where options contradict each other.
 BenchOptions parsed_options(const BenchCommand& c) {
     BenchOptions b = c.options;
@@ -699,14 +716,14 @@ BenchOptions parsed_options(const BenchCommand& c) {
     if (!c.accels.empty()) b.embree_qualities = c.qualities;
     if (c.dynamic_option->count()) b.dynamic = c.dynamic;
     distributed::checked([&] {
-        for (const std::string& blas : b.blas_builders) check_blas_builder(blas, b.toplevels);
         if (c.rebraid_option->count() && !contains_name(b.toplevels, "rebraid"))
             throw std::invalid_argument("--rebraid-threshold: only with --toplevel rebraid");
-        if (c.sa_max_option->count() && !contains_name(b.builders, "esc"))
-            throw std::invalid_argument("--esc-sa-max: only with --builder esc");
-        for (const std::string& value : b.esc_sa_max) parse_sa_max(value);
-        if (c.alpha_option->count() && !contains_name(b.builders, "sbvh") && !contains_name(b.blas_builders, "sbvh"))
-            throw std::invalid_argument("--sbvh-alpha: only with --builder sbvh");
+        b.builders = join_builder_specs(b.builders), b.blas_builders = join_builder_specs(b.blas_builders);
+        if (c.esc_option->count()) apply_param_alias("--esc-sa-max", "esc", kEscSaMaxKey, c.esc_area_limits, b);
+        if (c.alpha_option->count()) apply_param_alias("--sbvh-alpha", "sbvh", "alpha", c.alpha_values, b);
+        for (const std::string& blas : b.blas_builders) check_blas_builder(blas, b.toplevels);
+        for (const std::string& builder : b.builders)
+            if (builder != "auto") check_builder_name(builder);
     });
     return b;
 }
@@ -725,7 +742,7 @@ void register_bench(CLI::App& canopy) {
 
 // Row by row as make_entries makes them. Rows that differ only by traversal mode, intersector or collapse are
 // separate builds of the same size; auto has a row per planned frame count (under the first top level only, as it
-// chooses its own), rebraid one per opening threshold and esc one per SA_max.
+// chooses its own) and rebraid one per opening threshold.
 std::vector<BuildPlan> build_plans(const BenchOptions& o) {
     std::vector<BuildPlan> plans;
     const size_t copies = o.traversals.size() * o.intersectors.size() * o.collapses.size() * o.layouts.size();
@@ -735,8 +752,8 @@ std::vector<BuildPlan> build_plans(const BenchOptions& o) {
                 const bool auto_rows = builder == "auto";
                 if (auto_rows && toplevel != o.toplevels.front()) continue;
                 const size_t rows = copies * (auto_rows ? o.frames_planned.size()
-                                                        : rebraid_thresholds_of(toplevel, o).size() * sa_max_values_of(builder, o).size());
-                plans.insert(plans.end(), rows, {builder, kernel_width(kernel), !auto_rows && toplevel != "flat"});
+                                                        : rebraid_thresholds_of(toplevel, o).size());
+                plans.insert(plans.end(), rows, make_build_plan(builder, kernel_width(kernel), !auto_rows && toplevel != "flat"));
             }
     const bool two_level = std::any_of(o.toplevels.begin(), o.toplevels.end(), [](const std::string& t) { return t != "flat"; });
     for (size_t q = 0; q < o.embree_qualities.size(); ++q) {
@@ -759,7 +776,8 @@ BenchRow bench_row(const nlohmann::json& r) {
     BenchRow row{text("accel"), text("builder"), text("quality")};
     row.threads = r.contains("threads") ? r.at("threads").get<int>() : 0;
     if (r.at("rebraid_threshold").is_number()) row.rebraid_threshold = r.at("rebraid_threshold").get<double>();
-    if (r.contains("esc_sa_max") && r.at("esc_sa_max").is_string()) row.esc_sa_max = r.at("esc_sa_max").get<std::string>();
+    if (r.contains("builder_params") && r.at("builder_params").is_object())
+        for (const auto& param : r.at("builder_params").items()) row.builder_params.set(param.key(), param.value().get<std::string>());
     const bool dynamic = r.contains("rebuild_ms_mean");
     row.build_ms_min = number_or_nan(r, dynamic ? "first_build_ms" : "build_ms_min");
     row.frame_ms_mean = number_or_nan(r, dynamic ? "render_ms_mean" : "frame_ms_mean");

@@ -1,4 +1,5 @@
 #pragma once
+#include "accel/builder.h"
 #include "accel/memory_budget.h"
 #include "accel/two_level.h"
 #include "experiments/command.h"
@@ -15,13 +16,11 @@ namespace canopy {
 
 struct BenchOptions {
     std::string scene;  // the scene of run_bench(options); run_bench(scenes, options) sets it per scene
-    std::vector<std::string> builders{"binned"};
+    std::vector<std::string> builders{"binned"};  // specs with parameters: "sbvh:alpha=1e-5" (accel/builder.h)
     std::string start;  // start tree of the optimisers among the builders ("" for each one's default)
     std::vector<std::string> kernels{"auto"};
     std::vector<std::string> toplevels{"flat"};  // flat, two-level, rebraid
     std::vector<float> rebraid_thresholds{TwoLevelSettings().open_extent};  // a rebraid row each (sec. 4.2, Fig. 4)
-    std::vector<std::string> esc_sa_max{"auto"};  // builder esc: a row each (parse_sa_max: auto, 12.5, 8x)
-    float sbvh_alpha = kSbvhAlpha;                // builder sbvh's rows
     std::vector<std::string> blas_builders;  // object BVH builders of the two-level rows; empty: `builders`
     std::vector<std::string> traversals{"robust"};      // robust, fast
     std::vector<std::string> intersectors{"watertight"};  // watertight, moller
@@ -64,7 +63,7 @@ struct BenchRow {
     std::string quality;  // Embree's: low, medium or high; else empty
     int threads = 0;      // static benches: the --threads value of the row (0: all)
     std::optional<double> rebraid_threshold;  // rebraid rows
-    std::optional<std::string> esc_sa_max;    // esc rows
+    BuilderParams builder_params;              // canopy's rows of a named builder: each parameter's value
     static constexpr double kNone = std::numeric_limits<double>::quiet_NaN();
     double build_ms_min = kNone, frame_ms_mean = kNone;  // dynamic benches: the first build, the render's mean
     double sah = kNone, layout_sah = kNone, refs_per_tri = kNone, split_ms = kNone, bytes = kNone;

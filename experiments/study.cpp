@@ -87,7 +87,7 @@ std::vector<double> predicted(const std::vector<StudyRow>& rows, bool scalar, do
 std::vector<StudyRow> bvh_rows(const std::vector<StudyRow>& rows) {
     std::vector<StudyRow> out;
     for (const StudyRow& r : rows)
-        if (is_bvh_builder(r.builder)) out.push_back(r);
+        if (is_bvh_builder(spec_name(r.builder))) out.push_back(r);
     return out;
 }
 
@@ -195,7 +195,7 @@ void print_rotation_table(const std::vector<StudyScene>& results) {
                         change_text(percent_change(r.rotated_sah, r.sah), 8).c_str(),
                         change_text(percent_change(r.rotated_epo, r.epo), 8).c_str(),
                         change_text(percent_change(r.rotated_lcv, r.lcv), 8).c_str(), change_text(composite_change(r), 11).c_str());
-            if (!is_bvh_builder(r.builder)) continue;  // the averages are the paper's, over BVHs
+            if (!is_bvh_builder(spec_name(r.builder))) continue;  // the averages are the paper's, over BVHs
             time += percent_change(r.rotated_ns, r.simd_ns), sah += percent_change(r.rotated_sah, r.sah);
             epo += percent_change(r.rotated_epo, r.epo), composite += composite_change(r), ++n;
         }
@@ -286,9 +286,8 @@ nlohmann::json row_json(const StudyRow& r) {
 // The study reproduces the quality-metrics paper (Aila, Karras and Laine 2013): its SBVH at the paper's alpha, and
 // every builder's binary tree, whose metrics it measures, collapsed (lbvh's too, whose default has no binary tree).
 CanopyOptions study_options(const std::string& builder, const std::string& kernel) {
-    CanopyOptions options{builder, "", kernel};
+    CanopyOptions options{builder == "sbvh" ? "sbvh:alpha=1e-5" : builder, "", kernel};
     options.collapse = CollapseMethod::Optimal;
-    if (builder == "sbvh") options.sbvh_alpha = kPapersSbvhAlpha;
     return options;
 }
 
@@ -360,7 +359,7 @@ StudyScene study_scene(const std::string& scene_name, const Scene& scene, const 
                       name.c_str(), row.scalar_sah, row.scalar_epo, row.scalar_ns, simd->kernel().c_str(), row.sah,
                       row.epo, row.lcv, row.simd_ns);
         if (rotated) measure_rotated(row, *rotated, rotated_rays, o, report);
-        if (o.permute_nodes && is_bvh_builder(name)) measure_permuted(row, *simd, flat, rays, o, report);
+        if (o.permute_nodes && is_bvh_builder(spec_name(name))) measure_permuted(row, *simd, flat, rays, o, report);
         report.flush();  // a study takes minutes: show each row as it comes
         result.rows.push_back(row);
     }
@@ -474,6 +473,7 @@ void register_study(CLI::App& canopy) {
     study->add_option("--plot", st->plot_path, "Write a PNG: predicted (eq. 7) against measured SIMD ns/ray, a panel per scene");
     study->callback([st, size] {
         distributed::checked([&] {
+            st->builders = join_builder_specs(st->builders);
             for (const std::string& b : st->builders) check_builder_name(b);  // unknown names fail before any work
         });
         st->width = (*size)[0], st->height = (*size)[1];

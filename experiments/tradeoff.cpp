@@ -5,6 +5,7 @@
 #include "renderer/distributed.h"
 #include "renderer/sample_sum.h"
 #include "renderer/image.h"
+#include "accel/builder.h"
 #include "engine/options.h"
 #include "experiments/command.h"
 #include "experiments/plot.h"
@@ -224,6 +225,7 @@ void register_tradeoff(CLI::App& canopy) {
     tradeoff->callback([p] {
         TradeoffOptions& o = p->options;
         o.width = p->size[0], o.height = p->size[1];
+        o.builders = join_builder_specs(o.builders);
         if (p->accels.empty()) o.embree_qualities.clear();
         else if (o.embree_qualities.empty()) o.embree_qualities = {"medium"};
         const auto limit = limit_threads(p->threads);

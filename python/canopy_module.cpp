@@ -203,10 +203,16 @@ PYBIND11_MODULE(canopy, m) {
              "computes the end-point overlap (seconds on large scenes).");
 
     m.def("builders", [] {
-        std::vector<std::string> names;
-        for (const canopy::BuilderDescription& b : canopy::registered_builders()) names.push_back(b.name);
-        return names;
-    }, "The registered builders' names (Accel also takes 'auto').");
+        py::dict builders;
+        for (const canopy::BuilderDescription& b : canopy::registered_builders()) {
+            py::dict params;
+            for (const canopy::BuilderParamDescription& p : b.params)
+                params[py::str(p.key)] = py::dict("default"_a = p.default_value, "help"_a = p.help);
+            builders[py::str(b.name)] = py::dict("description"_a = b.description, "params"_a = params);
+        }
+        return builders;
+    }, "The registered builders by name, each with its description and parameters (key: default and help); Accel's "
+       "builder takes a name, 'NAME:key=value,key=value', or 'auto'.");
     m.def("load_triangles", &load_triangles, "path"_a,
           "Loads an .obj, .gltf, .glb, scene.json or gen:NAME?tris=N as world-space (vertices, triangles) arrays.");
 }

@@ -1,5 +1,6 @@
 // Structural invariants of every builder's trees, SAH by eq. 1, thread-count independence.
 #include "oracle.h"
+#include "engine/accelerator.h"
 #include "test_scale.h"
 
 #include <tbb/global_control.h>
@@ -144,4 +145,108 @@ TEST_CASE("the tree is the same with 1 and 2 threads", "[builders]") {
         CHECK(std::memcmp(one.nodes.data(), two.nodes.data(), one.nodes.size() * sizeof(BvhNode)) == 0);
         CHECK(one.refs == two.refs);
     }
+}
+
+namespace {
+
+// A toy builder registered from this file alone: binned SAH with its leaf size limit as a parameter, "leaf" (1 to
+// 64). What a parameterised builder's own files hold, in a few lines: its parameter parsed, checked and used.
+uint32_t toy_leaf(const std::string& text) {
+    size_t used = 0;
+    int leaf = 0;
+    try {
+        leaf = std::stoi(text, &used);
+    } catch (const std::exception&) {
+        used = 0;
+    }
+    if (text.empty() || used != text.size() || leaf < 1 || leaf > 64)
+        throw std::invalid_argument("toy leaf '" + text + "': a whole number from 1 to 64");
+    return uint32_t(leaf);
+}
+
+Bvh build_toy(BuildInput&& input, const BuildSettings& settings) {
+    BuildSettings capped = settings;
+    const std::string* leaf = settings.params.find("leaf");
+    capped.max_leaf_size = toy_leaf(leaf ? *leaf : "8");
+    capped.costs.inner *= 100.0f;  // leaves as large as the limit allows, so the limit shows
+    return find_builder("binned").build(std::move(input), capped);
+}
+
+BuilderEntry toy_entry() {
+    return {"toy", "binned SAH with a leaf size parameter (a test's)", &build_toy, nullptr,
+            {{"leaf", "8", "triangles a leaf holds at most", [](const std::string& text) { return std::to_string(toy_leaf(text)); }}},
+            1.5};
+}
+
+uint32_t largest_leaf(const Bvh& bvh) {
+    uint32_t largest = 0;
+    for (const BvhNode& node : bvh.nodes)
+        if (node.is_leaf()) largest = std::max(largest, node.count);
+    return largest;
+}
+
+}  // namespace
+
+TEST_CASE("a builder registered from a test file is listed, takes its parameter and is traced right", "[builders]") {
+    const BuilderRegistration toy = register_builder(toy_entry());
+    CHECK(is_bvh_builder("toy"));
+    const std::vector<BuilderName> names = all_builders();
+    CHECK(std::any_of(names.begin(), names.end(), [](const BuilderName& b) { return b.name == "toy" && b.description.find("leaf size") != std::string::npos; }));
+    CHECK_FALSE(find_builder("toy").optimiser());
+    CHECK(reference_cap_per_triangle("toy") == 1.5);
+    CHECK(builder_params_help(find_builder("toy")).find("toy:leaf=... (default 8)") != std::string::npos);
+    CHECK_THROWS_WITH(register_builder(toy_entry()), Catch::Contains("registered already"));
+
+    // Its parameter parses; unknown keys and bad values are refused, naming the builder, the key and the known ones.
+    const BuilderSpec spec = parse_builder_spec("toy:leaf=2");
+    CHECK(spec.name == "toy");
+    REQUIRE(spec.params.find("leaf"));
+    CHECK(*spec.params.find("leaf") == "2");
+    CHECK(spec.text() == "toy:leaf=2");
+    CHECK(parse_builder_spec("toy:leaf=08").text() == "toy");  // the default, spelt otherwise
+    CHECK_THROWS_WITH(parse_builder_spec("toy:size=2"), Catch::Contains("builder 'toy' has no parameter 'size' (known: leaf)"));
+    CHECK_THROWS_WITH(parse_builder_spec("toy:leaf=0"), Catch::Contains("toy leaf '0'"));
+    CHECK_THROWS_WITH(parse_builder_spec("toy:leaf"), Catch::Contains("no key=value"));
+    CHECK_THROWS_WITH(parse_builder_spec("toy:leaf=2,leaf=3"), Catch::Contains("given twice"));
+    CHECK_THROWS_WITH(parse_builder_spec("binned:leaf=2"), Catch::Contains("builder 'binned' has no parameter 'leaf' (it takes none)"));
+    CHECK(join_builder_specs({"toy:leaf=2", "binned", "esc:sa_max=8x", "binned"}) ==
+          std::vector<std::string>{"toy:leaf=2", "binned", "esc:sa_max=8x", "binned"});
+
+    // The parameter reaches the build, and the accelerator built by the toy answers as brute force does.
+    const FlatScene flat = flatten(load_scene("gen:box?tris=2000&seed=4"));
+    BuildSettings two;
+    two.params = spec.params;
+    CHECK(largest_leaf(find_builder("toy").build(BuildInput{flat.triangles, make_prim_refs(flat.triangles)}, two)) <= 2);
+    CHECK(largest_leaf(find_builder("toy").build(BuildInput{flat.triangles, make_prim_refs(flat.triangles)}, {})) > 2);
+    const std::vector<Ray> rays = random_rays(flat.triangles, 2000, 6);
+    const std::vector<Hit> expected = brute_force_all(flat.triangles, rays);
+    for (const char* kernel : {"bvh2", "auto"}) {
+        const auto accel = make_canopy_accelerator(flat, {"toy:leaf=2", "", kernel});
+        CHECK(accel->builder() == "toy:leaf=2");
+        accel->prepare();
+        accel->build();
+        std::vector<Hit> hits;
+        for (const Ray& ray : rays) hits.push_back(accel->trace(ray));
+        CHECK(count_mismatches(rays, expected, hits, std::string("toy ") + kernel) == 0);
+    }
+}
+
+TEST_CASE("a registered builder leaves the registry with its registration", "[builders]") {
+    {
+        const BuilderRegistration toy = register_builder(toy_entry());
+        CHECK(is_bvh_builder("toy"));
+    }
+    CHECK_FALSE(is_bvh_builder("toy"));
+    CHECK_THROWS_WITH(parse_builder_spec("toy:leaf=2"), Catch::Contains("unknown builder 'toy'"));
+    CHECK_THROWS_WITH(register_builder(BuilderEntry{"to:y", "", &build_toy}), Catch::Contains("without ':' or ','"));
+}
+
+TEST_CASE("builder specs split from a comma list keep their parameters together", "[builders]") {
+    CHECK(join_builder_specs({"esc:sa_max=8x", "binned", "sbvh:alpha=1e-5", "lbvh"}) ==
+          std::vector<std::string>{"esc:sa_max=8x", "binned", "sbvh:alpha=1e-5", "lbvh"});
+    const BuilderSpec esc = parse_builder_spec("esc:sa_max=8x");
+    CHECK(esc.text() == "esc:sa_max=8x");
+    CHECK(parse_builder_spec("esc:sa_max=auto").text() == "esc");
+    CHECK_THROWS_WITH(parse_builder_spec("esc:sa_max=8x,alpha=1"), Catch::Contains("builder 'esc' has no parameter 'alpha' (known: sa_max)"));
+    CHECK_THROWS_WITH(parse_builder_spec("esc:sa_max=-2x"), Catch::Contains("SA_max '-2x'"));
 }

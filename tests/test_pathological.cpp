@@ -90,7 +90,7 @@ void check_every_builder(std::span<const Triangle> tris, const std::string& scen
         const double cap = reference_cap_per_triangle(builder.name) * double(tris.size());
         CHECK(double(stats.references) <= cap);
         CHECK(double(binary.split.reference_capacity) <= cap + 1.0);
-        const BuildPlan plan{builder.name, 2, false};
+        const BuildPlan plan = make_build_plan(builder.name, 2, false);
         // The estimate expects two-triangle leaves; one-triangle leaves, the most nodes a tree has, double them.
         CHECK(stats.bytes <= 2 * estimate_memory(size, {&plan, 1}).binary);
         CHECK(count_mismatches(rays, expected, trace_widest(binary, tris, rays), scene + " / " + builder.name) == 0);

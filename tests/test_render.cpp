@@ -264,19 +264,19 @@ TEST_CASE("bench writes the documented JSON", "[bench][embree]") {
 
 TEST_CASE("bench plans the memory of the rows it makes, no more", "[bench]") {
     BenchOptions o;
-    o.builders = {"binned", "esc", "auto"};
+    o.builders = {"binned", "esc", "esc:sa_max=8x", "auto"};
     o.kernels = {"bvh8"};
     o.toplevels = {"flat", "rebraid"};
     o.rebraid_thresholds = {0.1f, 0.2f};
-    o.esc_sa_max = {"auto", "8x"};
     o.frames_planned = {1, 16, 256};
     o.embree_qualities = {};
-    // Flat: binned 1 row, esc 2 (an SA_max each), auto 3 (a frame count each); rebraid: binned 2 and esc 4 (a
-    // threshold each, times esc's SA_max), auto none (it chooses its own top level).
+    // Flat: binned and each esc 1 row, auto 3 (a frame count each); rebraid: binned and each esc 2 (a threshold
+    // each), auto none (it chooses its own top level).
     std::map<std::pair<std::string, bool>, int> rows;
     for (const BuildPlan& plan : build_plans(o)) ++rows[{plan.builder, plan.two_level}];
     const std::map<std::pair<std::string, bool>, int> expected{
-        {{"binned", false}, 1}, {{"esc", false}, 2}, {{"auto", false}, 3}, {{"binned", true}, 2}, {{"esc", true}, 4}};
+        {{"binned", false}, 1}, {{"esc", false}, 1}, {{"esc:sa_max=8x", false}, 1}, {{"auto", false}, 3},
+        {{"binned", true}, 2}, {{"esc", true}, 2}, {{"esc:sa_max=8x", true}, 2}};
     CHECK(rows == expected);
 }
 

@@ -1,6 +1,7 @@
 // Memory bounds: the estimate grows with what a build holds, the bound is the least of the machine's and the
 // caller's, and load_scene asks before it generates a scene or before instancing multiplies a file's triangles.
 #include "scenes_test_support.h"
+#include "accel/builder.h"
 #include "accel/memory_budget.h"
 
 using namespace canopy;
@@ -11,6 +12,10 @@ namespace {
 MemoryEstimate estimate_for(const SceneSize& size, BuildPlan plan) {
     return estimate_memory(size, {&plan, 1});
 }
+// A plan with the builder's reference cap and auto's candidates from the registry, as the commands make it.
+MemoryEstimate estimate_for(const SceneSize& size, const std::string& builder, int width, bool two_level) {
+    return estimate_for(size, make_build_plan(builder, width, two_level));
+}
 
 }  // namespace
 
@@ -20,7 +25,7 @@ TEST_CASE("the memory estimate follows the leaf policy, the layout's bytes, refe
     CHECK(estimate_for(large, {}).total() > 900 * estimate_for(small, {}).total());
     // Block leaves fill to 6 of their 8 triangles: a binary node pair and a 320-byte block per 6 triangles, a wide
     // node per 4 leaves; the PrimRefs and their scratch are freed before the layout, which is as large, is written.
-    const MemoryEstimate binned = estimate_for(large, {"binned", 8, false});
+    const MemoryEstimate binned = estimate_for(large, "binned", 8, false);
     CHECK(double(binned.binary) / n == Approx(2.0 * 32.0 / 6.0 + 4.0).epsilon(1e-3));
     CHECK(double(binned.layout) / n == Approx(320.0 / 6.0 + 256.0 / 24.0).epsilon(1e-3));
     CHECK(binned.references < uint64_t(n));
@@ -28,26 +33,26 @@ TEST_CASE("the memory estimate follows the leaf policy, the layout's bytes, refe
     CHECK(binned.process == 0);
     CHECK(binned.frames == 0);
     // The scalar kernel's binary leaves hold two triangles, each a 40-byte LeafTriangle.
-    const MemoryEstimate bvh2 = estimate_for(large, {"binned", 2, false});
+    const MemoryEstimate bvh2 = estimate_for(large, "binned", 2, false);
     CHECK(double(bvh2.binary) / n == Approx(32.0 + 4.0).epsilon(1e-3));
     CHECK(double(bvh2.layout) / n == Approx(40.0 + 32.0).epsilon(1e-3));
     // sbvh may double its references: its trees double.
-    const MemoryEstimate sbvh = estimate_for(large, {"sbvh", 8, false});
+    const MemoryEstimate sbvh = estimate_for(large, "sbvh", 8, false);
     CHECK(double(sbvh.layout) == Approx(2.0 * double(binned.layout)).epsilon(1e-5));
     CHECK(double(sbvh.binary) == Approx(2.0 * double(binned.binary)).epsilon(1e-5));
     CHECK(sbvh.scene == binned.scene);
     // Embree's row: its copy of the triangles and indices, its PrimRefs while it builds, its tree.
-    const MemoryEstimate embree = estimate_for(large, {"embree", 8, false});
+    const MemoryEstimate embree = estimate_for(large, "embree", 8, false);
     CHECK(embree.flat == binned.flat + uint64_t(n) * (sizeof(Triangle) + 3 * sizeof(uint32_t)));
     CHECK(embree.references == uint64_t(n) * sizeof(PrimRef));
     CHECK(embree.binary == 0);
     CHECK(embree.layout > uint64_t(n) * 64);
     // A two-level build copies object triangles and keeps per-placement data.
     const SceneSize instanced{3000, 1000, 1'000'000, 1000};
-    CHECK(estimate_for(instanced, {"binned", 8, true}).layout > estimate_for(small, {"binned", 8, true}).layout);
+    CHECK(estimate_for(instanced, "binned", 8, true).layout > estimate_for(small, "binned", 8, true).layout);
     // "auto" plans for the largest build it may choose; the bench for all its rows' trees, and for one build's
     // scratch at a time, as its rows build one after another.
-    CHECK(estimate_for(large, {"auto", 8, false}).total() >= estimate_for(large, {"esc", 8, false}).total());
+    CHECK(estimate_for(large, "auto", 8, false).total() >= estimate_for(large, "esc", 8, false).total());
     const MemoryEstimate rows = estimate_memory(large, std::vector<BuildPlan>(3, BuildPlan{}));
     CHECK(rows.binary == 3 * binned.binary);
     CHECK(rows.layout == 3 * binned.layout);
@@ -81,7 +86,7 @@ TEST_CASE("a build that does not fit is refused with the estimate and the memory
         CHECK_THAT(message, Catch::Contains(format_bytes(estimate.total() - 1) + " is available (--memory-limit)"));
     }
     // A kd-tree has no binary BVH: its estimate does not name one.
-    const MemoryEstimate kd = estimate_for({3'000'000, 1'000'000, 1'000'000, 1}, BuildPlan{"kdtree", 2, false});
+    const MemoryEstimate kd = estimate_for({3'000'000, 1'000'000, 1'000'000, 1}, "kdtree", 2, false);
     CHECK(kd.binary == 0);
     CHECK_THAT(kd.describe(), !Catch::Contains("binary BVH"));
     CHECK(format_bytes(512) == "512 bytes");

@@ -146,7 +146,7 @@ TEST_CASE("early split clipping pieces lie in their triangle, cover it and respe
     }
     CHECK_THROWS_AS(early_split_clip_refs(tris, make_prim_refs(tris), 0.0f), std::invalid_argument);
     BuildSettings negative;
-    negative.esc_sa_max = {SaMax::Unit::Absolute, -1.0f};
+    negative.params.set(kEscSaMaxKey, "-1");
     CHECK_THROWS_AS(build_esc(BuildInput{tris, make_prim_refs(tris)}, negative), std::invalid_argument);
 }
 
@@ -164,8 +164,8 @@ TEST_CASE("SA_max parses as auto, a box area or median ideal areas, and means th
     std::vector<Triangle> scaled = slivers.triangles;
     for (Triangle& t : scaled) t = {t.v0 * 1048576.0f, t.v1 * 1048576.0f, t.v2 * 1048576.0f};
     const SaMax four{SaMax::Unit::MedianIdealArea, 4.0f};
-    const float at_one = resolve_sa_max(slivers.triangles, make_prim_refs(slivers.triangles), four);
-    const float at_scale = resolve_sa_max(scaled, make_prim_refs(scaled), four);
+    const float at_one = resolve_esc_area(slivers.triangles, make_prim_refs(slivers.triangles), four);
+    const float at_scale = resolve_esc_area(scaled, make_prim_refs(scaled), four);
     CHECK(at_scale == Approx(at_one * 1048576.0f * 1048576.0f).epsilon(1e-5));
     const size_t pieces = early_split_clip_refs(slivers.triangles, make_prim_refs(slivers.triangles), at_one).size();
     CHECK(pieces > slivers.triangles.size());
@@ -173,7 +173,7 @@ TEST_CASE("SA_max parses as auto, a box area or median ideal areas, and means th
     // Halving SA_max never cuts fewer pieces.
     const SaMax two{SaMax::Unit::MedianIdealArea, 2.0f};
     CHECK(early_split_clip_refs(slivers.triangles, make_prim_refs(slivers.triangles),
-                                resolve_sa_max(slivers.triangles, make_prim_refs(slivers.triangles), two)).size() >= pieces);
+                                resolve_esc_area(slivers.triangles, make_prim_refs(slivers.triangles), two)).size() >= pieces);
 }
 
 TEST_CASE("automatic SA_max splits scenes of slivers and leaves well-filled boxes alone", "[builders][split]") {
@@ -240,7 +240,7 @@ TEST_CASE("sbvh's alpha: the papers' 1e-5 tries spatial splits where canopy's 1e
         tris.push_back({o - Vec3(0.5f), o + Vec3(0.5f), o + Vec3(0.5f + 1e-3f, 0.5f - 1e-3f, 0.5f)});
     }
     BuildSettings papers;
-    papers.sbvh_alpha = kPapersSbvhAlpha;
+    papers.params.set("alpha", "1e-5");
     const Bvh at_papers = build_sbvh(BuildInput{tris, make_prim_refs(tris)}, papers);
     const Bvh at_default = build_sbvh(BuildInput{tris, make_prim_refs(tris)}, BuildSettings{});
     const Bvh no_spatial = build_sbvh_with(BuildInput{tris, make_prim_refs(tris)}, BuildSettings{}, SbvhSettings{1e30f, 2.0f});
@@ -253,11 +253,13 @@ TEST_CASE("sbvh's alpha: the papers' 1e-5 tries spatial splits where canopy's 1e
     // The accelerator takes it for sbvh only, finite and >= 0.
     FlatScene flat;
     flat.triangles = tris;
-    for (const auto& [builder, alpha] : {std::pair{"binned", 1e-5f}, std::pair{"sbvh", -1.0f}, std::pair{"sbvh", std::numeric_limits<float>::infinity()}}) {
-        CanopyOptions options{builder, "", "bvh8"};
-        options.sbvh_alpha = alpha;
-        CHECK_THROWS_WITH(make_canopy_accelerator(flat, options), Catch::Contains("sbvh alpha"));
+    CHECK_THROWS_WITH(make_canopy_accelerator(flat, {"binned:alpha=1e-5", "", "bvh8"}), Catch::Contains("no parameter 'alpha'"));
+    for (const char* spec : {"sbvh:alpha=-1", "sbvh:alpha=inf", "sbvh:alpha=1e-5x"}) {
+        INFO(spec);
+        CHECK_THROWS_WITH(make_canopy_accelerator(flat, {spec, "", "bvh8"}), Catch::Contains("sbvh alpha"));
     }
+    CHECK(make_canopy_accelerator(flat, {"sbvh:alpha=1e-5", "", "bvh8"})->builder() == "sbvh:alpha=1e-5");
+    CHECK(make_canopy_accelerator(flat, {"sbvh:alpha=0.001", "", "bvh8"})->builder() == "sbvh");  // the default
 }
 
 TEST_CASE("split builders agree with brute force on adversarial input", "[oracle][split]") {

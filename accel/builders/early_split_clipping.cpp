@@ -148,7 +148,18 @@ std::string sa_max_name(const SaMax& sa_max) {
     return text;
 }
 
-float resolve_sa_max(std::span<const Triangle> triangles, const std::vector<PrimRef>& refs, const SaMax& sa_max) {
+std::vector<BuilderParam> esc_params() {
+    return {{kEscSaMaxKey, "auto",
+             "SA_max of early split clipping: auto, a box area (12.5) or a multiple of the median ideal triangle area (8x)",
+             [](const std::string& text) { return sa_max_name(parse_sa_max(text)); }}};
+}
+
+SaMax esc_sa_max(const BuildSettings& settings) {
+    const std::string* text = settings.params.find(kEscSaMaxKey);
+    return text ? parse_sa_max(*text) : SaMax{};
+}
+
+float resolve_esc_area(std::span<const Triangle> triangles, const std::vector<PrimRef>& refs, const SaMax& sa_max) {
     if (sa_max.unit == SaMax::Unit::Automatic) return automatic_sa_max(triangles, refs);
     if (!(sa_max.value > 0.0f) || !std::isfinite(sa_max.value))
         throw std::invalid_argument("esc: SA_max must be finite and > 0, got " + std::to_string(sa_max.value));
@@ -160,7 +171,7 @@ float resolve_sa_max(std::span<const Triangle> triangles, const std::vector<Prim
 
 Bvh build_esc(BuildInput&& input, const BuildSettings& settings) {
     auto clip = [&](std::span<const Triangle> triangles, std::vector<PrimRef>&& refs) {
-        const float sa_max = resolve_sa_max(triangles, refs, settings.esc_sa_max);
+        const float sa_max = resolve_esc_area(triangles, refs, esc_sa_max(settings));
         const auto cap = uint64_t(kMaxEscReferencesPerTriangle * double(refs.size()));
         return std::isfinite(sa_max) ? early_split_clip_refs(triangles, std::move(refs), sa_max, cap) : std::move(refs);
     };

@@ -3,6 +3,7 @@
 
 #include <cmath>
 #include <span>
+#include <string>
 #include <vector>
 
 namespace canopy {
@@ -41,11 +42,31 @@ inline float ideal_area(const Triangle& t) {
     return std::abs(n.x) + std::abs(n.y) + std::abs(n.z);
 }
 
+// Early split clipping's surface-area limit, SA_max of Ernst and Greiner 2007 (Algorithm 4): automatic (above), an
+// absolute box area in scene units (the paper's), or a multiple of the scene's median ideal triangle area (Karras
+// and Aila 2013, sec. 5), which means the same on scenes of any scale.
+struct SaMax {
+    enum class Unit { Automatic, Absolute, MedianIdealArea };
+    Unit unit = Unit::Automatic;
+    float value = 0.0f;  // > 0 and finite unless automatic
+
+    bool operator==(const SaMax&) const = default;
+};
+// "auto", "12.5" (absolute) or "8x" (median ideal areas); throws std::invalid_argument naming `text` otherwise.
+SaMax parse_sa_max(const std::string& text);
+std::string sa_max_name(const SaMax& sa_max);  // parse_sa_max's inverse
+
+// Builder esc's parameter, "sa_max" (parse_sa_max's texts, default auto), as its registry entry lists it.
+constexpr const char* kEscSaMaxKey = "sa_max";
+std::vector<BuilderParam> esc_params();
+// The SA_max a build of esc with these settings uses (the automatic one when the settings give none).
+SaMax esc_sa_max(const BuildSettings& settings);
+
 // `sa_max` in box area units for this scene: infinity for no splitting. Throws std::invalid_argument for a value
 // that is not finite and positive.
-float resolve_sa_max(std::span<const Triangle> triangles, const std::vector<PrimRef>& refs, const SaMax& sa_max);
+float resolve_esc_area(std::span<const Triangle> triangles, const std::vector<PrimRef>& refs, const SaMax& sa_max);
 
-// early_split_clip_refs at settings.esc_sa_max within kMaxEscReferencesPerTriangle, then binned SAH
+// early_split_clip_refs at esc_sa_max(settings) within kMaxEscReferencesPerTriangle, then binned SAH
 // (accel/binned_sah.h) on the grown references.
 Bvh build_esc(BuildInput&& input, const BuildSettings& settings);
 

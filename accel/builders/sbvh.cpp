@@ -7,6 +7,7 @@
 #include "accel/triangle_clipping.h"
 
 #include <array>
+#include <cstdio>
 #include <cmath>
 #include <optional>
 #include <stdexcept>
@@ -356,9 +357,35 @@ Bvh build_sbvh_with(BuildInput&& input, const BuildSettings& settings, const Sbv
     return bvh;
 }
 
+float parse_sbvh_alpha(const std::string& text) {
+    size_t used = 0;
+    float alpha = -1.0f;
+    try {
+        alpha = std::stof(text, &used);
+    } catch (const std::exception&) {
+        used = 0;
+    }
+    if (text.empty() || used != text.size() || !(alpha >= 0.0f) || !std::isfinite(alpha))
+        throw std::invalid_argument("sbvh alpha '" + text + "': a share of the root's area, finite and >= 0");
+    return alpha;
+}
+
+std::vector<BuilderParam> sbvh_params() {
+    char default_text[32];
+    std::snprintf(default_text, sizeof default_text, "%g", double(kSbvhAlpha));
+    return {{"alpha", default_text,
+             "spatial splits only where object splits overlap by more than this share of the root's area "
+             "(Stich et al. 2009 and the quality-metrics paper: 1e-5)",
+             [](const std::string& text) {
+                 char canonical[32];
+                 std::snprintf(canonical, sizeof canonical, "%g", double(parse_sbvh_alpha(text)));
+                 return std::string(canonical);
+             }}};
+}
+
 Bvh build_sbvh(BuildInput&& input, const BuildSettings& settings) {
     SbvhSettings sbvh;
-    sbvh.alpha = settings.sbvh_alpha;
+    if (const std::string* alpha = settings.params.find("alpha")) sbvh.alpha = parse_sbvh_alpha(*alpha);
     return build_sbvh_with(std::move(input), settings, sbvh);
 }
 

@@ -81,12 +81,12 @@ std::vector<double> growth_targets(const StandIn& s) {
 
 // The SA_max, in median ideal triangle areas ("x", accel/builder.h), whose early split clipping grows this
 // scene's references to `target` per triangle or just below: bisection on log2 of the multiple.
-std::string sa_max_for_growth(const FlatScene& flat, double target) {
+std::string limit_for_growth(const FlatScene& flat, double target) {
     const std::vector<PrimRef> refs = make_prim_refs(flat.triangles);
-    const float unit = resolve_sa_max(flat.triangles, refs, {SaMax::Unit::MedianIdealArea, 1.0f});
+    const float unit = resolve_esc_area(flat.triangles, refs, {SaMax::Unit::MedianIdealArea, 1.0f});
     const auto growth = [&](double log2_multiple) {
-        const double sa_max = double(unit) * std::exp2(log2_multiple);
-        return double(early_split_clip_count(flat.triangles, refs, float(sa_max))) / double(refs.size());
+        const double area_limit = double(unit) * std::exp2(log2_multiple);
+        return double(early_split_clip_count(flat.triangles, refs, float(area_limit))) / double(refs.size());
     };
     if (!std::isfinite(unit)) return "1x";  // most triangles degenerate: nothing to split at any multiple
     double lo = -8.0, hi = 24.0;  // growth(lo) is the most ESC cuts; growth(hi) about 1
@@ -120,11 +120,11 @@ constexpr Setting kSettings[] = {
      "paths of up to 8 bounces, Embree MEDIUM in the same run", 0, "bvh8", 8, 1024, 768, 256, 192, 5, 3, true},
 };
 
-BenchOptions bench_options(const Setting& setting, const std::vector<std::string>& sa_max, bool quick) {
+BenchOptions bench_options(const Setting& setting, const std::vector<std::string>& area_limits, bool quick) {
     BenchOptions o;
-    o.builders = {"binned", "esc", "kdtree"};
-    o.esc_sa_max = sa_max;
-    o.esc_sa_max.push_back("auto");
+    o.builders = {"binned"};
+    for (const std::string& limit : area_limits) o.builders.push_back(std::string("esc:") + kEscSaMaxKey + "=" + limit);
+    o.builders.insert(o.builders.end(), {"esc", "kdtree"});
     o.kernels = {setting.kernel};
     o.threads = {setting.threads};
     o.bounces = setting.bounces;
@@ -139,7 +139,7 @@ BenchOptions bench_options(const Setting& setting, const std::vector<std::string
 
 // One structure's figures from a bench row.
 struct Measured {
-    std::string label, sa_max;
+    std::string label, area_limit;
     double refs_per_tri, bytes, build_s, inner, triangles, frame_s;
     bool kd = false, embree = false;
 };
@@ -149,10 +149,11 @@ std::vector<Measured> measured_rows(const BenchScene& scene) {
     for (const BenchRow& r : scene.rows) {
         const bool embree = r.accel == "embree";
         const std::string builder = embree ? "Embree " + r.quality : r.builder;
-        const std::string sa_max = r.esc_sa_max.value_or("");
+        const std::string* param = r.builder_params.find(kEscSaMaxKey);
+        const std::string area_limit = param ? *param : "";
         std::string label = builder == "binned" ? "bvh (binned SAH)" : builder == "kdtree" ? "kd-tree" : builder;
-        if (!sa_max.empty()) label = sa_max == "auto" ? "bvh ESC, automatic SA_max" : "bvh ESC, SA_max " + sa_max;
-        rows.push_back({label, sa_max, embree ? kNotMeasured : r.refs_per_tri, r.bytes, r.build_ms_min / 1e3, r.inner_per_ray,
+        if (!area_limit.empty()) label = area_limit == "auto" ? "bvh ESC, automatic SA_max" : "bvh ESC, SA_max " + area_limit;
+        rows.push_back({label, area_limit, embree ? kNotMeasured : r.refs_per_tri, r.bytes, r.build_ms_min / 1e3, r.inner_per_ray,
                         r.triangles_per_ray, r.frame_ms_mean / 1e3, builder == "kdtree", embree});
     }
     return rows;
@@ -293,7 +294,7 @@ std::string changes(const std::vector<StandIn>& subjects, const std::vector<Sett
                              " (kd-tree " + format("%.1f", kd_now->inner) + ")");
         double best_split = now[0].frame_s;
         for (const Measured& m : now)
-            if (!m.embree && (m.kd || !m.sa_max.empty())) best_split = std::min(best_split, m.frame_s);
+            if (!m.embree && (m.kd || !m.area_limit.empty())) best_split = std::min(best_split, m.frame_s);
         const double gain = now[0].frame_s / best_split;
         (gain >= 1.05 ? pays : does_not).push_back(name + " " + format("%.2fx", gain));
     }
@@ -305,7 +306,7 @@ std::string changes(const std::vector<StandIn>& subjects, const std::vector<Sett
            ", and not on " + list_text(does_not) + ".\n";
 }
 
-PaperDocument document(const std::vector<StandIn>& subjects, const std::vector<std::vector<std::string>>& sa_max,
+PaperDocument document(const std::vector<StandIn>& subjects, const std::vector<std::vector<std::string>>& area_limit,
                        const std::vector<SettingResult>& results) {
     PaperDocument d{"Ernst and Greiner 2007, Table 1: early split clipping against a plain BVH and a kd-tree",
                     "This is a **quick** run: smaller stand-in scenes, smaller images, one build and one frame.",
@@ -326,7 +327,7 @@ PaperDocument document(const std::vector<StandIn>& subjects, const std::vector<s
         std::string body = std::string(r.setting->what) + ".\n\n";
         for (size_t i = 0; i < subjects.size(); ++i) {
             body += "### " + subjects[i].label + "\n\n";
-            body += "SA_max of the matched rows: " + list_text(sa_max[i]) + ".\n\n";
+            body += "SA_max of the matched rows: " + list_text(area_limit[i]) + ".\n\n";
             body += scene_table(subjects[i], r.scenes[i], r.setting->embree) + "\n";
         }
         d.sections.emplace_back(r.setting->title, body);
@@ -337,29 +338,29 @@ PaperDocument document(const std::vector<StandIn>& subjects, const std::vector<s
 }
 
 // Per subject, the SA_max values whose references grow as the paper's memory did.
-std::vector<std::vector<std::string>> matched_sa_max(const std::vector<StandIn>& list) {
-    std::vector<std::vector<std::string>> sa_max;
+std::vector<std::vector<std::string>> matched_area_limits(const std::vector<StandIn>& list) {
+    std::vector<std::vector<std::string>> area_limit;
     for (const StandIn& s : list) {
         const FlatScene flat = flatten(load_scene(s.spec));
         if (flat.triangles.empty()) throw std::invalid_argument("scene '" + s.spec + "' has no triangles");
         std::vector<std::string> values;
-        for (const double target : growth_targets(s)) values.push_back(sa_max_for_growth(flat, target));
-        sa_max.push_back(values);
+        for (const double target : growth_targets(s)) values.push_back(limit_for_growth(flat, target));
+        area_limit.push_back(values);
     }
-    return sa_max;
+    return area_limit;
 }
 
 }  // namespace
 
 std::optional<PaperDocument> reproduce_ernst_greiner_2007(const ReproduceOptions& o) {
     const std::vector<StandIn> list = subjects<PaperScene>(o, kSubjects);
-    const std::vector<std::vector<std::string>> sa_max = matched_sa_max(list);
+    const std::vector<std::vector<std::string>> area_limit = matched_area_limits(list);
     std::vector<SettingResult> results;
     nlohmann::json raw = nlohmann::json::object();
     for (const Setting& setting : kSettings) {
         SettingResult result{&setting, {}};
         for (size_t i = 0; i < list.size(); ++i) {
-            const std::vector<BenchScene> scene = measure_bench({list[i].spec}, bench_options(setting, sa_max[i], o.quick));
+            const std::vector<BenchScene> scene = measure_bench({list[i].spec}, bench_options(setting, area_limit[i], o.quick));
             if (!distributed::is_root()) continue;
             result.scenes.push_back(measured_rows(scene.at(0)));
             raw[setting.key].push_back(scene.at(0).json);
@@ -367,7 +368,7 @@ std::optional<PaperDocument> reproduce_ernst_greiner_2007(const ReproduceOptions
         results.push_back(std::move(result));
     }
     if (!distributed::is_root()) return std::nullopt;
-    PaperDocument d = document(list, sa_max, results);
+    PaperDocument d = document(list, area_limit, results);
     d.raw = std::move(raw);
     return d;
 }

@@ -98,9 +98,16 @@ struct AccelStats {
     uint64_t bytes = 0;                              // the traced layout: nodes and leaf triangles
 };
 
+struct BuilderParamDescription {
+    std::string key;            // AccelOptions::builder takes "NAME:key=value,key=value"
+    std::string default_value;
+    std::string help;
+};
+
 struct BuilderDescription {
     std::string name;
     std::string description;
+    std::vector<BuilderParamDescription> params;
 };
 
 // An accelerator over meshes, built once, then queried from any number of threads at once.

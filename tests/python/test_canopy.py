@@ -90,13 +90,24 @@ def scene():
 
 
 def test_builders_lists_the_registry():
-    names = canopy.builders()
-    assert {"binned", "sweep", "lbvh", "sbvh", "bittner"} <= set(names)
-    assert len(names) == len(set(names))
+    builders = canopy.builders()
+    assert {"binned", "sweep", "lbvh", "sbvh", "bittner"} <= set(builders)
+    assert all(b["description"] for b in builders.values())
+    assert builders["sbvh"]["params"]["alpha"]["default"] == "0.001"
+    assert builders["binned"]["params"] == {}
+
+
+def test_builder_parameters_are_taken_and_checked(scene):
+    vertices, triangles, origins, directions, oracle = scene
+    accel = canopy.Accel(vertices, triangles, builder="esc:sa_max=8x")
+    assert accel.stats()["builder"] == "esc:sa_max=8x"
+    assert_matches_oracle(accel.intersect(origins, directions), oracle)
+    with pytest.raises(ValueError, match="builder 'esc' has no parameter 'alpha'"):
+        canopy.Accel(vertices, triangles, builder="esc:alpha=1")
 
 
 @pytest.mark.parametrize("kernel", KERNELS)
-@pytest.mark.parametrize("builder", canopy.builders() + ["auto"])
+@pytest.mark.parametrize("builder", [*canopy.builders(), "auto"])
 def test_every_builder_and_kernel_finds_the_oracles_hits(scene, builder, kernel):
     vertices, triangles, origins, directions, oracle = scene
     accel = canopy.Accel(vertices, triangles, builder=builder, kernel=kernel)
