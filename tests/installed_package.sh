@@ -16,5 +16,5 @@ printf 'v -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\nv 0 0 1\nf 1 2 5\nf 2 3 5\nf 3 4
 "$work/build/cast_rays" "$work/pyramid.obj" sbvh
 if [ -n "$python" ]; then
   IFS=';' read -r -a python_env <<<"${PYTHON_SANITIZER_ENV:-}"
-  env "${python_env[@]}" PYTHONPATH="$(echo "$work"/prefix/lib/python3*/dist-packages)" "$python" -c "import canopy; print('python:', canopy.builders())"
+  env "${python_env[@]}" PYTHONPATH="$(echo "$work"/prefix/lib/python3*/dist-packages)" "$python" -c "import canopy; print('python:', sorted(canopy.builders()))"
 fi
