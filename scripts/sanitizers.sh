@@ -64,7 +64,8 @@ for stage in "${stages[@]}"; do
       # A cache configured before the TSan TBB existed would still name the system's.
       grep -q "^TBB_DIR:PATH=$PWD/$tbb_prefix/" build-tsan/CMakeCache.txt ||
         { echo "sanitizers: build-tsan does not use $tbb_prefix (remove build-tsan/CMakeCache.txt)" >&2; exit 1; }
-      cmake --build --preset tsan -j "$(nproc)"
+      # Only the test executables: the stage runs none of the command line's, Python's or the examples' tests.
+      cmake --build --preset tsan -j "$(nproc)" --target canopy_tests canopy_api_tests
       ctest --preset tsan -j "$(nproc)" --timeout 1800 -R "$tsan_tests" -E '^cli_'
       ;;
     *) echo "sanitizers: unknown stage '$stage' (known: asan, tsan)" >&2; exit 2 ;;
