@@ -2,6 +2,7 @@
 #include "accel/bvh_compact.h"
 #include "accel/builder.h"
 #include "accel/parallel.h"
+#include "base/huge_pages.h"
 
 namespace canopy {
 
@@ -62,7 +63,8 @@ TreeStats tree_stats(const Bvh& bvh, uint64_t triangle_count) {
 }
 
 std::vector<PrimRef> make_prim_refs(std::span<const Triangle> triangles) {
-    std::vector<PrimRef> refs(triangles.size());
+    std::vector<PrimRef> refs;
+    resize_on_huge_pages(refs, triangles.size());
     parallel::for_each(triangles.size(), 16 * 1024, [&](size_t i) {
         const BBox box = BBox::of(triangles[i]);
         refs[i] = {box.lower, uint32_t(i), box.upper, 0};

@@ -3,7 +3,7 @@
 // binary BVH, with leaf triangles copied in leaf order so a leaf is one contiguous run (N = 2) or one
 // run of N-wide SoA blocks (N = 4, 8).
 #include "accel/bvh.h"
-#include "accel/huge_page_allocator.h"
+#include "base/huge_pages.h"
 
 #include <algorithm>
 #include <cmath>

@@ -1,5 +1,6 @@
 // Scene dispatch by name, flattening of instances into world space, automatic framing.
 #include "scenes/loaders.h"
+#include "base/huge_pages.h"
 
 #include <glm/vec4.hpp>
 #include <tbb/blocked_range.h>
@@ -163,7 +164,7 @@ uint64_t instanced_triangle_count(const Scene& scene) {
 FlatScene flatten(const Scene& scene) {
     FlatScene flat;
     const std::vector<size_t> offsets = instance_offsets(scene);
-    flat.triangles.resize(offsets.back());
+    resize_on_huge_pages(flat.triangles, offsets.back());
     const bool with_materials = !scene.materials.empty();
     uint32_t fallback = 0;
     if (with_materials) {
@@ -172,7 +173,7 @@ FlatScene flatten(const Scene& scene) {
             return scene.meshes[instance.mesh].triangle_material.empty();
         });
         if (any_without) fallback = default_material(flat);
-        flat.material.resize(flat.triangles.size());
+        resize_on_huge_pages(flat.material, flat.triangles.size());
         flat.has_emitters = std::any_of(scene.materials.begin(), scene.materials.end(),
                                         [](const Material& m) { return m.emission != Vec3(0.0f); });
     }
