@@ -8,7 +8,8 @@ packages=(cmake ninja-build g++ libtbb-dev libopenimageio-dev openimageio-tools 
           libtinyobjloader-dev libtinygltf-dev catch2 nlohmann-json3-dev libcli11-dev libembree-dev fonts-dejavu-core
           python3-dev pybind11-dev python3-numpy python3-pytest   # the Python module, for /usr/bin/python3
           libopenmpi-dev openmpi-bin                               # jobs of several processes (mpirun, srun)
-          curl xz-utils)  # scripts/sanitizers.sh tsan fetches and unpacks oneTBB's source
+          curl xz-utils   # scripts/sanitizers.sh tsan fetches and unpacks oneTBB's source
+          ccache)         # a fresh clone reuses the objects of earlier builds (CMakeLists.txt)
 # CANOPY_FUZZ=1: also clang 14 and its libFuzzer runtime, for the fuzz preset (scripts/fuzz.sh).
 [ "${CANOPY_FUZZ:-0}" = 1 ] && packages+=(clang-14 libclang-rt-14-dev)
 missing=()
