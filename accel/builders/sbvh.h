@@ -4,9 +4,9 @@
 namespace canopy {
 
 // SBVH's alpha (Stich et al. 2009): spatial splits are tried only where the best object split's children overlap by
-// more than this share of the root's surface area. Stich et al. and the quality-metrics paper use 1e-5; at 1e-3 sbvh
-// bvh8 built crytek-sponza, sibenik and conference in 0.54x, 0.57x and 0.78x the time, its frames as fast
-// (docs/results.md), so canopy's default is 1e-3 and the papers' reproductions give "sbvh:alpha=1e-5".
+// more than this share of the root's surface area. Stich et al. and the quality-metrics paper use 1e-5; 1e-3 builds
+// in about half the time for frames as fast (docs/results.md#sbvhs-alpha), so canopy's default is 1e-3 and the papers'
+// reproductions give "sbvh:alpha=1e-5".
 constexpr float kSbvhAlpha = 1e-3f;
 // Builder sbvh's parameter, "alpha" (finite and >= 0, default kSbvhAlpha), as its registry entry lists it.
 std::vector<BuilderParam> sbvh_params();
