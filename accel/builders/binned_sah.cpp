@@ -2,7 +2,6 @@
 
 #include "accel/sah_binning.h"
 #include "accel/top_down_builder.h"
-#include "base/huge_pages.h"
 
 namespace canopy {
 namespace {
@@ -123,7 +122,7 @@ Bvh build_binned_sah(BuildInput&& input, const BuildSettings& settings) {
     TopDownBuilder<BinnedSahSearch> builder(search, settings, limits, input.refs.size());
     Bvh bvh;
     bvh.nodes = builder.build({0, uint32_t(input.refs.size()), box, centroids});
-    resize_on_huge_pages(bvh.refs, input.refs.size());
+    bvh.refs.resize(input.refs.size());
     parallel::for_each(input.refs.size(), 64 * 1024, [&](size_t i) { bvh.refs[i] = input.refs[i].prim; });
     return bvh;
 }
