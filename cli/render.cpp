@@ -58,6 +58,7 @@ FrameSettings frame_settings(const RenderOptions& o) {
     settings.tracer = o.tracer == "stream" ? TracerKind::Stream : TracerKind::Single;
     settings.stream_paths = o.stream_paths;
     settings.batch_traversal = parse_batch_traversal(o.batch_traversal);
+    settings.stream_batching = parse_stream_batching(o.stream_batching);
     return settings;
 }
 
@@ -162,6 +163,8 @@ void register_render(CLI::App& canopy) {
         ->check(CLI::Range(1, 1 << 24))->capture_default_str();
     render->add_option("--batch-traversal", r->batch_traversal, kBatchTraversalHelp)
         ->check(CLI::IsMember({"single", "packet", "stream"}))->capture_default_str();
+    render->add_option("--stream-batches", r->stream_batching, kStreamBatchingHelp)
+        ->check(CLI::IsMember({"measured", "wavefront", "paths"}))->capture_default_str();
     render->add_option("--memory-limit", r->memory_limit, kMemoryLimitHelp)->transform(CLI::AsSizeValue(false));
     render->add_option("--collapse", r->collapse, kCollapseHelp)->check(CLI::IsMember({"optimal", "greedy", "direct"}));
     render->add_option("--layout", r->layout, kLayoutHelp)->check(CLI::IsMember({"standard", "compressed"}))->capture_default_str();

@@ -26,6 +26,7 @@ struct RenderOptions {
     std::string tracer = "single";       // single (one path at a time) or stream (wavefront, sorted ray batches)
     uint32_t stream_paths = 1u << 18;    // stream: paths in flight per batch
     std::string batch_traversal = "packet";  // stream: how batches are traced: single, packet, stream
+    std::string stream_batching = "measured";  // stream: each batch's way: measured, wavefront, paths
     std::optional<uint64_t> memory_limit;    // bytes: lowers the memory bound below what the machine has free
 };
 

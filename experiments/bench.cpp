@@ -104,16 +104,20 @@ std::vector<Entry> rows_per_tracer(std::vector<Entry> accelerators, const BenchO
             const TracerKind tracer = parse_tracer(t);
             const bool canopy = a.accel->library() == "canopy";
             const std::vector<std::string>& ways = canopy ? o.batch_traversals : o.embree_streams;
-            for (const std::string& batch : tracer == TracerKind::Stream ? ways : std::vector<std::string>{""}) {
-                Entry row;
-                row.accel = a.accel;
-                row.rebraid_threshold = a.rebraid_threshold, row.builder_params = a.builder_params;
-                row.tracer = tracer;
-                row.batch = ways.size() > 1 ? batch : "";
-                if (canopy && !batch.empty()) row.settings.batch_traversal = parse_batch_traversal(batch);
-                row.settings.embree_packets = !canopy && batch == "16";
-                rows.push_back(std::move(row));
-            }
+            const bool stream = tracer == TracerKind::Stream;
+            for (const std::string& batch : stream ? ways : std::vector<std::string>{""})
+                for (const std::string& batching : stream ? o.stream_batchings : std::vector<std::string>{""}) {
+                    Entry row;
+                    row.accel = a.accel;
+                    row.rebraid_threshold = a.rebraid_threshold, row.builder_params = a.builder_params;
+                    row.tracer = tracer;
+                    row.batch = ways.size() > 1 ? batch : "";
+                    if (o.stream_batchings.size() > 1 && stream) row.batch += (row.batch.empty() ? "" : "/") + batching;
+                    if (canopy && !batch.empty()) row.settings.batch_traversal = parse_batch_traversal(batch);
+                    if (stream) row.settings.stream_batching = parse_stream_batching(batching);
+                    row.settings.embree_packets = !canopy && batch == "16";
+                    rows.push_back(std::move(row));
+                }
         }
     return rows;
 }
@@ -293,8 +297,9 @@ void print_table(const std::vector<Entry>& entries, uint64_t tris, SceneReport& 
                "first canopy bvh8 row's visits" : "");
     for (const Entry& e : entries)
         if (e.tracer == TracerKind::Stream)
-            out.printf("%s: sorting %.1f%% of the frame, stream memory %.1f MB (all threads)\n", e.label().c_str(),
-                       100.0 * e.sort_share(), double(e.stream->bytes.load()) / 1e6);
+            out.printf("%s: sorting %.1f%% of the frame, stream memory %.1f MB (all threads), batches path by path "
+                       "%llu of %llu\n", e.label().c_str(), 100.0 * e.sort_share(), double(e.stream->bytes.load()) / 1e6,
+                       (unsigned long long)e.stream->path_batches.load(), (unsigned long long)e.stream->batches.load());
 }
 
 // An auto row's calibration, from its last build: every candidate, measured or predicted.
@@ -337,6 +342,10 @@ nlohmann::json results_json(const std::vector<Entry>& entries, uint64_t tris) {
                                                : nlohmann::json(e.settings.embree_packets ? "rtcIntersect16" : "rtcIntersect1M")},
                            {"sort_share", e.tracer == TracerKind::Stream ? nlohmann::json(e.sort_share()) : nlohmann::json(nullptr)},
                            {"stream_bytes", e.tracer == TracerKind::Stream ? nlohmann::json(e.stream->bytes.load()) : nlohmann::json(nullptr)},
+                           {"stream_batches", e.tracer != TracerKind::Stream ? nlohmann::json(nullptr)
+                                              : nlohmann::json{{"way", stream_batching_name(e.settings.stream_batching)},
+                                                               {"batches", e.stream->batches.load()},
+                                                               {"path_by_path", e.stream->path_batches.load()}}},
                            {"build_ms_min", e.build_min()},
                            {"build_ms_median", median(e.build_ms)},
                            {"mprims_per_s", double(tris) / e.build_min() / 1e3},
@@ -429,7 +438,7 @@ void render_frames(std::vector<Entry>& entries, const Scene& scene, FlatScene& f
     std::vector<Image> images(entries.size(), Image(o.width, o.height));
     for (size_t i = 0; i < entries.size(); ++i) render(*entries[i].accel, shading[i], camera, 0, images[i]);  // warm-up
     for (Image& image : images) image.clear();
-    for (Entry& e : entries) e.stream->sort_ns = 0;
+    for (Entry& e : entries) e.stream->sort_ns = 0, e.stream->batches = 0, e.stream->path_batches = 0;
     for (int frame = 1; frame <= o.frames; ++frame) {
         if (dynamic) move_all(entries, *dynamic, uint32_t(frame), flat);
         for (size_t i = 0; i < entries.size(); ++i) {
@@ -659,6 +668,8 @@ void add_row_options(CLI::App& bench, BenchCommand& c) {
         ->delimiter(',')->check(CLI::IsMember({"single", "stream"}))->capture_default_str();
     bench.add_option("--batch-traversal", b.batch_traversals, std::string(kBatchTraversalHelp) + "; a stream row each")
         ->delimiter(',')->check(CLI::IsMember({"single", "packet", "stream"}))->capture_default_str();
+    bench.add_option("--stream-batches", b.stream_batchings, std::string(kStreamBatchingHelp) + "; a stream row each")
+        ->delimiter(',')->check(CLI::IsMember({"measured", "wavefront", "paths"}))->capture_default_str();
     bench.add_option("--embree-stream", b.embree_streams,
                       "Stream tracer: Embree's batch interface, a stream row each: 1m (rtcIntersect1M, incoherent), 16 (rtcIntersect16 packets)")
         ->delimiter(',')->check(CLI::IsMember({"1m", "16"}))->capture_default_str();

@@ -31,6 +31,7 @@ struct BenchOptions {
     uint32_t stream_paths = 1u << 18;            // stream: paths in flight per batch
     std::vector<std::string> embree_streams{"1m"};  // stream: Embree's batch interface (a row each): 1m (rtcIntersect1M), 16 (packets)
     std::vector<std::string> batch_traversals{"packet"};  // stream: how canopy traces a batch (a row each): single, packet, stream
+    std::vector<std::string> stream_batchings{"measured"};  // stream: each batch's way (a row each): measured, wavefront, paths
     int builds = 20;
     int frames = 10;
     std::vector<int> frames_planned{16};  // `--builder auto` rows: one per value, each planning for that many frames

@@ -235,7 +235,8 @@ public:
     uint64_t render(const ShadingScene& scene, const PinholeCamera& camera, uint32_t frame, Image& image,
                     const std::function<void(float)>& on_tile) const override {
         if (scene.settings.tracer == TracerKind::Stream)
-            return render_frame_stream(EmbreeBatchTracer{scene_, instances(), scene.settings.embree_packets}, scene, camera, frame, image, on_tile);
+            return render_frame_stream(EmbreeBatchTracer{scene_, instances(), scene.settings.embree_packets},
+                                       EmbreeTracer{scene_, instances()}, scene, camera, frame, image, on_tile);
         return render_frame(EmbreeTracer{scene_, instances()}, scene, camera, frame, image, on_tile);
     }
 

@@ -70,8 +70,8 @@ uint64_t render_of_width(const AnyKernel& kernel, const FrameJob& job) {
     return with_kernel_of_width<N>(kernel, [&]<class Kernel>(const Kernel& k) -> uint64_t {
         if (job.scene.settings.tracer == TracerKind::Stream) {
             if constexpr (Kernel::kStreams)
-                return render_frame_stream(BatchTracer<Kernel>{k, job.scene.settings.batch_traversal}, job.scene, job.camera,
-                                           job.frame, job.image, job.on_tile);
+                return render_frame_stream(BatchTracer<Kernel>{k, job.scene.settings.batch_traversal}, k, job.scene,
+                                           job.camera, job.frame, job.image, job.on_tile);
             else
                 throw std::invalid_argument("layout 'compressed': the single-ray tracer only, not the stream tracer");
         }

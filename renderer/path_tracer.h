@@ -6,12 +6,14 @@
 #include "renderer/camera.h"
 #include "renderer/image.h"
 #include "renderer/sampling.h"
+#include "renderer/stream_choice.h"
 #include "scenes/scene.h"
 
 #include <tbb/parallel_for.h>
 
 #include <atomic>
 #include <functional>
+#include <memory>
 #include <vector>
 
 namespace canopy {
@@ -27,6 +29,7 @@ struct FrameSettings {
     // rays, and past this size gain little for their memory (docs/results.md#tracers-single-and-stream).
     uint32_t stream_paths = 1u << 18;
     BatchTraversal batch_traversal = BatchTraversal::Packet;  // stream: how canopy's kernels trace a batch
+    StreamBatching stream_batching = StreamBatching::Measured;  // stream: each batch as a wavefront or path by path
     bool embree_packets = false;  // stream: Embree's batches in rtcIntersect16 packets, not through rtcIntersect1M
     int max_bounces = 8;           // at most max_bounces + 1 closest-hit rays per path
     // The single tracer traces only a sample of the frame's pixels, one 8 x 8 tile in each `sample_stride` (1: the
@@ -42,6 +45,8 @@ struct ShadingScene {
     const FlatScene& flat;
     const FrameSettings& settings;
     StreamStats* stream_stats = nullptr;  // the stream tracer's sort time and memory, when the caller wants them
+    // The stream tracer's choice of each batch's way, learned over the frames rendered with this ShadingScene.
+    std::shared_ptr<StreamChooser> stream_chooser = std::make_shared<StreamChooser>();
     // Decided once per frame, so that the protocol's paths (no --materials) and scenes without lights pay one
     // predictable branch per bounce and add nothing to their radiance.
     bool emitters = settings.material_albedo && flat.has_emitters;
@@ -143,6 +148,16 @@ Vec3 trace_path(const Tracer& tracer, const ShadingScene& scene, Ray& ray, Rng& 
     return path.radiance;
 }
 
+// Pixel (x, y)'s path of frame `frame`, added to `accumulated`.
+template <class Tracer>
+[[gnu::always_inline]] inline void trace_pixel(const Tracer& tracer, const ShadingScene& scene, const PinholeCamera& camera,
+                                               uint32_t frame, int x, int y, Image& accumulated, uint64_t& rays) {
+    Rng rng(uint64_t(y) * uint64_t(scene.settings.width) + uint64_t(x), frame);
+    const float u = rng.next_float(), v = rng.next_float();
+    Ray ray = camera.generate(x, y, u, v);  // built in place: trace_path takes it by reference
+    accumulated.add(x, y, trace_path(tracer, scene, ray, rng, rays));
+}
+
 // A frame's sample (FrameSettings::sample_stride > 1): square tiles of kSampleTile pixels a side (neighbours' paths
 // share nodes and cache lines as in a whole frame, which shorter runs of pixels did not reproduce: trees of more nodes
 // looked slower than they trace), one tile in each `stride` tiles in raster order, at a scrambled place, so that the
@@ -193,12 +208,7 @@ uint64_t render_frame(const Tracer& tracer, const ShadingScene& scene, const Pin
         uint64_t rays = 0;
         const TileRect t = traced_tile(tile, w, stride);
         for (int y = t.y0; y < std::min(t.y0 + t.size, h); ++y) {
-            for (int x = t.x0; x < std::min(t.x0 + t.size, w); ++x) {
-                Rng rng(uint64_t(y) * uint64_t(w) + uint64_t(x), frame);
-                const float u = rng.next_float(), v = rng.next_float();
-                Ray ray = camera.generate(x, y, u, v);  // built in place: trace_path takes it by reference
-                accumulated.add(x, y, trace_path(tracer, scene, ray, rng, rays));
-            }
+            for (int x = t.x0; x < std::min(t.x0 + t.size, w); ++x) trace_pixel(tracer, scene, camera, frame, x, y, accumulated, rays);
         }
         tile_rays[size_t(tile)] = rays;
         if (on_tile) on_tile(float(done.fetch_add(1) + 1) / float(tiles));

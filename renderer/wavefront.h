@@ -4,7 +4,9 @@
 // (kernels/ray_order.h), traced as one batch through the tracer's batch query, shaded by the same shade_bounce as
 // the single-path tracer, and the paths still alive compacted for the next bounce. A path keeps its own random
 // numbers, drawn in the same order as under `single`, so with an exact batch query every path, and so the image
-// and the ray count, are the single-path tracer's (up to exact ties between triangles).
+// and the ray count, are the single-path tracer's (up to exact ties between triangles). Where sorted bounces lose
+// (large scenes seen from outside), batches go path by path through the single-ray tracer instead, as measured
+// (stream_choice.h).
 //
 // A batch tracer has `Scratch` (its per-thread memory, with `bytes()`) and
 // `void closest(std::span<const Ray>, std::span<Record>, Scratch&) const`, where Record is its `Record` if it names
@@ -29,6 +31,7 @@ namespace canopy {
 struct StreamStats {
     std::atomic<uint64_t> sort_ns{0};   // summed over threads: computing keys and permuting rays and paths
     std::atomic<uint64_t> bytes{0};     // every thread's memory (paths, rays, hits, keys, tracer scratch), summed
+    std::atomic<uint64_t> batches{0}, path_batches{0};  // batches traced, and of them path by path (stream_choice.h)
 };
 
 // The threads a frame runs on: the arena's, within the limit --threads sets (tbb::global_control).
@@ -58,6 +61,11 @@ struct BatchPlan {
         batches = std::max(batches, threads * kBatchesPerThread);
         batches = (batches + threads - 1) / threads * threads;
         return {std::max<uint64_t>(1, std::min(batches, tiles)), side, width, height};
+    }
+    // The most paths a batch holds.
+    uint64_t most_paths() const {
+        const uint64_t tiles = (width + side - 1) / side * ((height + side - 1) / side);
+        return (tiles + batches - 1) / batches * side * side;
     }
     // Calls f(pixel) for every pixel (y * width + x) of batch `b`.
     template <class F>
@@ -116,6 +124,15 @@ struct Wavefront {
         for (uint32_t i = 0; i < live; ++i) sorted_rays[i] = rays[order[i]];
     }
 
+    // Every buffer grown to hold `n` paths and written once, so that the first touch of fresh memory (its page faults)
+    // is paid here, once per thread, and not inside a batch whose time the stream chooser measures.
+    void reserve_written(size_t n) {
+        const auto grow = [n](auto& v) {
+            if (v.capacity() < n) v.resize(n), v.clear();
+        };
+        grow(paths), grow(rays), grow(sorted_rays), grow(hits), grow(sorted_hits), grow(keys), grow(order), grow(radix_scratch);
+    }
+
     // The rays of this bounce in the order they are traced, and where their hits go.
     std::span<const Ray> traced_rays(uint32_t live) const { return {(sorted ? sorted_rays : rays).data(), live}; }
     std::span<Record> traced_hits(uint32_t live) {
@@ -170,58 +187,110 @@ template <class Record>
     return triangle_surface(scene.flat.triangles[hit.prim], hit);
 }
 
-// Renders one sample per pixel of frame `frame` into `accumulated`, as render_frame does, through the tracer's batch
-// query. Returns rays traced. `on_batch` (optional) is called after each batch with the fraction of the frame done.
-template <class BatchTracer>
-uint64_t render_frame_stream(const BatchTracer& tracer, const ShadingScene& scene, const PinholeCamera& camera,
-                             uint32_t frame, Image& accumulated, const std::function<void(float)>& on_batch = {}) {
+namespace detail {
+
+// One batch as a wavefront: its paths advance one bounce at a time, each bounce's rays sorted and traced as one batch.
+// Returns rays traced; adds the time spent sorting to `sort_ns`.
+template <class BatchTracer, class Wavefront>
+uint64_t trace_wavefront(const BatchTracer& tracer, const ShadingScene& scene, const PinholeCamera& camera, uint32_t frame,
+                         const BatchPlan& plan, uint64_t b, Wavefront& wf, Image& accumulated, uint64_t& sort_ns) {
+    const int w = scene.settings.width;
+    wf.paths.clear();
+    wf.rays.clear();
+    plan.for_each_pixel(b, [&](uint32_t pixel) {
+        const int x = int(pixel % uint32_t(w)), y = int(pixel / uint32_t(w));
+        wf.paths.push_back({PathState{}, Rng(uint64_t(y) * uint64_t(w) + uint64_t(x), frame), pixel});
+        const float u = wf.paths.back().rng.next_float(), v = wf.paths.back().rng.next_float();
+        wf.rays.push_back(camera.generate(x, y, u, v));
+    });
+    uint32_t live = uint32_t(wf.paths.size());
+    uint64_t traced = 0;
+    for (int depth = 0; live > 0; ++depth) {
+        sort_ns += timed_ns([&] { wf.sort(live); });
+        tracer.closest(wf.traced_rays(live), wf.traced_hits(live), wf.scratch);
+        sort_ns += timed_ns([&] { wf.unsort(live); });
+        traced += live;
+        uint32_t next_live = 0;
+        for (uint32_t i = 0; i < live; ++i) {
+            prefetch_hit_triangle(scene, wf.hits, i + kShadePrefetch, live);
+            StreamPath& path = wf.paths[i];
+            Ray next;
+            const bool found = wf.hits[i].found();
+            const SurfaceHit surface = found ? shading_surface(scene, wf.rays[i], wf.hits[i]) : SurfaceHit{};
+            if (shade_bounce(scene, wf.rays[i], found, surface, depth, path.state, path.rng, next)) {
+                wf.paths[next_live] = path;
+                wf.rays[next_live++] = next;
+            } else {
+                accumulated.add(int(path.pixel % uint32_t(w)), int(path.pixel / uint32_t(w)), path.state.radiance);
+            }
+        }
+        live = next_live;
+    }
+    return traced;
+}
+
+// One batch path by path through the single-ray tracer, in the batch's tile order. Returns rays traced.
+template <class SingleTracer>
+uint64_t trace_paths(const SingleTracer& single, const ShadingScene& scene, const PinholeCamera& camera, uint32_t frame,
+                     const BatchPlan& plan, uint64_t b, Image& accumulated) {
+    const uint32_t w = uint32_t(scene.settings.width);
+    uint64_t traced = 0;
+    plan.for_each_pixel(b, [&](uint32_t pixel) {
+        trace_pixel(single, scene, camera, frame, int(pixel % w), int(pixel / w), accumulated, traced);
+    });
+    return traced;
+}
+
+}  // namespace detail
+
+// Renders one sample per pixel of frame `frame` into `accumulated`, as render_frame does, each batch either as a
+// wavefront through the tracer's batch query or path by path through `single`, as scene.stream_chooser decides
+// (stream_choice.h). Returns rays traced. `on_batch` (optional) is called after each batch with the fraction of the
+// frame done.
+template <class BatchTracer, class SingleTracer>
+uint64_t render_frame_stream(const BatchTracer& tracer, const SingleTracer& single, const ShadingScene& scene,
+                             const PinholeCamera& camera, uint32_t frame, Image& accumulated,
+                             const std::function<void(float)>& on_batch = {}) {
     StreamStats* const stats = scene.stream_stats;
+    StreamChooser& chooser = *scene.stream_chooser;
+    const BatchPlan plan = BatchPlan::of(uint64_t(scene.settings.width), uint64_t(scene.settings.height),
+                                         scene.settings.stream_paths, working_threads());
+    if (chooser.whole_frame_by_paths(scene.settings.stream_batching)) {
+        // Path by path through the single-ray tracer's own tiles, balanced over the threads as finely as its frames are.
+        const uint64_t rays = render_frame(single, scene, camera, frame, accumulated, on_batch);
+        if (stats) stats->batches += plan.batches, stats->path_batches += plan.batches;
+        return rays;
+    }
     using Record = typename detail::BatchRecord<BatchTracer>::type;
     using Wavefront = detail::Wavefront<typename BatchTracer::Scratch, Record>;
-    const int w = scene.settings.width;
-    const BatchPlan plan = BatchPlan::of(uint64_t(w), uint64_t(scene.settings.height), scene.settings.stream_paths,
-                                         working_threads());
     static tbb::enumerable_thread_specific<Wavefront> wavefronts;  // reused from frame to frame
-    std::atomic<uint64_t> rays{0}, done{0}, sort_ns{0};
+    std::atomic<uint64_t> rays{0}, done{0}, sort_ns{0}, path_batches{0};
     tbb::parallel_for(uint64_t(0), plan.batches, uint64_t(1), [&](uint64_t b) {
-        Wavefront& wf = wavefronts.local();
-        wf.paths.clear();
-        wf.rays.clear();
-        plan.for_each_pixel(b, [&](uint32_t pixel) {
-            const int x = int(pixel % uint32_t(w)), y = int(pixel / uint32_t(w));
-            wf.paths.push_back({PathState{}, Rng(uint64_t(y) * uint64_t(w) + uint64_t(x), frame), pixel});
-            const float u = wf.paths.back().rng.next_float(), v = wf.paths.back().rng.next_float();
-            wf.rays.push_back(camera.generate(x, y, u, v));
-        });
-        uint32_t live = uint32_t(wf.paths.size());
+        const StreamChooser::Way way = chooser.next(scene.settings.stream_batching);
         uint64_t traced = 0, sorting = 0;
-        for (int depth = 0; live > 0; ++depth) {
-            sorting += detail::timed_ns([&] { wf.sort(live); });
-            tracer.closest(wf.traced_rays(live), wf.traced_hits(live), wf.scratch);
-            sorting += detail::timed_ns([&] { wf.unsort(live); });
-            traced += live;
-            uint32_t next_live = 0;
-            for (uint32_t i = 0; i < live; ++i) {
-                detail::prefetch_hit_triangle(scene, wf.hits, i + detail::kShadePrefetch, live);
-                detail::StreamPath& path = wf.paths[i];
-                Ray next;
-                const bool found = wf.hits[i].found();
-                const SurfaceHit surface = found ? shading_surface(scene, wf.rays[i], wf.hits[i]) : SurfaceHit{};
-                if (shade_bounce(scene, wf.rays[i], found, surface, depth, path.state, path.rng, next)) {
-                    wf.paths[next_live] = path;
-                    wf.rays[next_live++] = next;
-                } else {
-                    accumulated.add(int(path.pixel % uint32_t(w)), int(path.pixel / uint32_t(w)), path.state.radiance);
-                }
-            }
-            live = next_live;
+        bool counted = true;
+        Wavefront* wf = nullptr;
+        size_t bytes = 0;
+        if (way == StreamChooser::Way::Wavefront) {
+            wf = &wavefronts.local();
+            wf->reserve_written(plan.most_paths());
+            bytes = wf->bytes();
         }
+        const uint64_t ns = detail::timed_ns([&] {
+            if (wf) traced = detail::trace_wavefront(tracer, scene, camera, frame, plan, b, *wf, accumulated, sorting);
+            else traced = detail::trace_paths(single, scene, camera, frame, plan, b, accumulated);
+        });
+        counted = !wf || wf->bytes() == bytes;  // a batch that grew its buffers after all paid for fresh memory
+        chooser.record(way, ns, traced, counted);
         rays += traced;
         sort_ns += sorting;
+        path_batches += way == StreamChooser::Way::Paths;
         if (on_batch) on_batch(float(done.fetch_add(1) + 1) / float(plan.batches));
     });
     if (stats) {
         stats->sort_ns += sort_ns;
+        stats->batches += plan.batches;
+        stats->path_batches += path_batches;
         uint64_t all = 0;  // the threads that have traced batches, each with the memory its largest batch took
         for (const Wavefront& wf : wavefronts) all += wf.bytes();
         stats->bytes = std::max(stats->bytes.load(), all);

@@ -264,18 +264,26 @@ struct Frame {
     uint64_t rays;
 };
 
+// Frames 3, 4, ... (`frames` of them) through one ShadingScene, so that the stream tracer's choices carry over.
 Frame render_with(const Accelerator& accel, const Scene& scene, const FlatScene& flat, TracerKind tracer, uint32_t paths,
-                  BatchTraversal how = BatchTraversal::Packet) {
+                  BatchTraversal how = BatchTraversal::Packet, StreamBatching batching = StreamBatching::Measured,
+                  int frames = 1) {
     FrameSettings settings;
     settings.width = 48, settings.height = 36;
     settings.tracer = tracer, settings.stream_paths = paths, settings.batch_traversal = how;
+    settings.stream_batching = batching;
     StreamStats stats;
     const ShadingScene shading{flat, settings, &stats};
     Image image(settings.width, settings.height);
     const PinholeCamera camera(scene_camera(scene, flat), settings.width, settings.height);
-    const uint64_t rays = render(accel, shading, camera, 3, image);
-    if (tracer == TracerKind::Stream) CHECK(stats.bytes.load() > 0);
-    return {image.average(1), image.mean(1), rays};
+    uint64_t rays = 0;
+    for (int f = 0; f < frames; ++f) rays += render(accel, shading, camera, uint32_t(3 + f), image);
+    if (tracer == TracerKind::Stream) {
+        CHECK(stats.batches.load() >= uint64_t(frames));
+        CHECK((batching == StreamBatching::Paths) == (stats.path_batches.load() == stats.batches.load()));
+        if (batching != StreamBatching::Paths) CHECK(stats.bytes.load() > 0);
+    }
+    return {image.average(frames), image.mean(frames), rays};
 }
 
 }  // namespace
@@ -299,7 +307,80 @@ TEST_CASE("the stream tracer renders the single-path tracer's paths", "[stream]"
                     CHECK(stream.rays == single.rays);
                     CHECK(stream.pixels == single.pixels);
                 }
+            // Each batch as a wavefront, path by path, or as measured, over frames whose choices carry over.
+            const Frame singles = render_with(*accel, scene, flat, TracerKind::Single, 0, BatchTraversal::Packet,
+                                              StreamBatching::Measured, 3);
+            for (StreamBatching batching : {StreamBatching::Wavefront, StreamBatching::Paths, StreamBatching::Measured}) {
+                INFO(spec << " " << kernel << ", batches " << stream_batching_name(batching));
+                const Frame stream = render_with(*accel, scene, flat, TracerKind::Stream, 97, BatchTraversal::Packet, batching, 3);
+                CHECK(stream.rays == singles.rays);
+                CHECK(stream.pixels == singles.pixels);
+            }
         }
+    }
+}
+
+namespace {
+
+// Records `n` batches of way `way` at `ns_per_ray`, each chosen by the chooser first (as the tracer does).
+void run_batches(StreamChooser& chooser, int n, const std::array<double, 2>& ns_per_ray, int& paths) {
+    for (int i = 0; i < n; ++i) {
+        const StreamChooser::Way way = chooser.next(StreamBatching::Measured);
+        paths += way == StreamChooser::Way::Paths;
+        chooser.record(way, uint64_t(1000 * ns_per_ray[size_t(way)]), 1000, true);
+    }
+}
+
+}  // namespace
+
+TEST_CASE("the stream tracer's chooser tries both ways, then keeps to the faster", "[stream]") {
+    using Way = StreamChooser::Way;
+    SECTION("a way asked for is the only way") {
+        StreamChooser chooser;
+        CHECK(chooser.next(StreamBatching::Wavefront) == Way::Wavefront);
+        CHECK(chooser.next(StreamBatching::Paths) == Way::Paths);
+        CHECK(chooser.whole_frame_by_paths(StreamBatching::Paths));
+        CHECK(!chooser.whole_frame_by_paths(StreamBatching::Wavefront));
+    }
+    SECTION("batches in flight together try both ways; a batch that grew its buffers is tried again") {
+        StreamChooser chooser;
+        CHECK(chooser.next(StreamBatching::Measured) == Way::Wavefront);
+        CHECK(chooser.next(StreamBatching::Measured) == Way::Paths);
+        chooser.record(Way::Wavefront, 5000, 1000, false);
+        chooser.record(Way::Paths, 2000, 1000, true);
+        CHECK(!chooser.whole_frame_by_paths(StreamBatching::Measured));
+        CHECK(chooser.next(StreamBatching::Measured) == Way::Wavefront);
+    }
+    SECTION("a way slower by more than kClose is never tried again; paths that win take whole frames") {
+        for (const Way slow : {Way::Wavefront, Way::Paths}) {
+            StreamChooser chooser;
+            std::array<double, 2> cost{1.0, 1.0};
+            cost[size_t(slow)] = 1.5;
+            int paths = 0;
+            run_batches(chooser, 2 * StreamChooser::kProbes, cost, paths);
+            CHECK(paths == StreamChooser::kProbes);
+            paths = 0;
+            run_batches(chooser, 1000, cost, paths);
+            CHECK(paths == (slow == Way::Paths ? 0 : 1000));
+            CHECK(chooser.whole_frame_by_paths(StreamBatching::Measured) == (slow == Way::Wavefront));
+        }
+    }
+    SECTION("ways within kClose are both measured again, the slower ever more rarely") {
+        StreamChooser chooser;
+        int paths = 0;
+        run_batches(chooser, 1000, {1.0, 1.05}, paths);
+        CHECK(paths >= StreamChooser::kProbes);
+        CHECK(paths <= StreamChooser::kProbes + 11);  // once at each power of two of the choices after trying
+        CHECK(!chooser.whole_frame_by_paths(StreamBatching::Measured));
+    }
+    SECTION("a first measurement taken in noise is corrected by the retries") {
+        StreamChooser chooser;
+        int paths = 0;
+        run_batches(chooser, 4, {1.0, 0.97}, paths);  // paths looked faster at first
+        run_batches(chooser, 2000, {1.0, 1.06}, paths);
+        paths = 0;
+        run_batches(chooser, 100, {1.0, 1.06}, paths);
+        CHECK(paths <= 1);
     }
 }
 
