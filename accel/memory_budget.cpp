@@ -181,8 +181,8 @@ std::string MemoryEstimate::describe() const {
                                                       {"binary BVH", binary}, {"traversal layout", layout},
                                                       {"images and batches", frames}};
     std::string parts;
-    for (const auto& [name, bytes] : terms)
-        if (bytes) parts += (parts.empty() ? "" : ", ") + std::string(name) + " " + format_bytes(bytes);
+    for (const auto& [name, bytes] : terms)  // a term under a KiB (a rounding remainder) says nothing beside MiB
+        if (bytes >= 1024) parts += (parts.empty() ? "" : ", ") + std::string(name) + " " + format_bytes(bytes);
     return format_bytes(total()) + " (" + parts + ")";
 }
 
