@@ -45,17 +45,23 @@ std::vector<Ray> rays_from_inside(std::span<const Triangle> sphere, const Vec3& 
     std::uniform_int_distribution<size_t> pick(0, sphere.size() - 1);
     std::vector<Ray> rays;
     rays.reserve(count);
+    constexpr size_t kMostDegenerate = 1000;
+    size_t degenerate = 0;
     while (rays.size() < count) {
         const Vec3 origin = center + 0.5f * radius * Vec3(u(rng), u(rng), u(rng)) / std::sqrt(3.0f);
         const Triangle& t = sphere[pick(rng)];
-        Vec3 target;
+        Vec3 d;
         switch (rays.size() % 3) {
-            case 0: target = t.v0; break;
-            case 1: target = glm::mix(t.v0, t.v1, unit(rng)); break;
-            default: target = origin + Vec3(u(rng), u(rng), u(rng)); break;
+            case 0: d = t.v0 - origin; break;
+            case 1: d = glm::mix(t.v0, t.v1, unit(rng)) - origin; break;
+            default: d = Vec3(u(rng), u(rng), u(rng)); break;  // a direction, not a point: far out, a point within 1
+                                                                 // of the origin rounds onto it
         }
-        const Vec3 d = target - origin;
+        // An origin that rounds onto its vertex (a sphere smaller than the float spacing where it lies) is drawn again.
         if (glm::dot(d, d) > 0.0f) rays.push_back({origin, glm::normalize(d)});
+        else if (++degenerate > kMostDegenerate)
+            throw std::invalid_argument("accuracy: a sphere of radius " + std::to_string(radius) +
+                                        " is below float's spacing at its centre: no ray from inside it has a direction");
     }
     return rays;
 }

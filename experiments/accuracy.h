@@ -17,7 +17,8 @@ namespace canopy {
 std::vector<Triangle> closed_sphere(int levels, const Vec3& center, float radius);
 
 // Rays from inside the sphere (within half its radius of the centre): one in three aimed exactly at a vertex, one
-// in three at a point on a shared edge, the rest in random directions. Deterministic for a seed.
+// in three at a point on a shared edge, the rest in random directions. Deterministic for a seed. Throws
+// std::invalid_argument for a sphere too small for float to tell its points apart where it lies.
 std::vector<Ray> rays_from_inside(std::span<const Triangle> sphere, const Vec3& center, float radius, size_t count,
                                   uint64_t seed);
 

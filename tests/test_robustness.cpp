@@ -168,9 +168,23 @@ TEST_CASE("the accuracy measurement: watertight kernels never leak at the extrem
     }
 }
 
+// Rays from inside a sphere far out: every ray drawn, every direction finite and of unit length, up to where float
+// cannot tell the sphere's points apart (there, an error rather than a loop that never ends).
+TEST_CASE("rays from inside small spheres far out all have directions, or are refused", "[accuracy]") {
+    for (const double offset : {1e8, 1e9, 1e12}) {
+        INFO("offset " << offset);
+        const Vec3 center = float(offset) * Vec3(1, -1, 1);
+        const std::vector<Triangle> sphere = closed_sphere(2, center, 100.0f * float(offset) * 1e-6f);
+        const std::vector<Ray> rays = rays_from_inside(sphere, center, 100.0f * float(offset) * 1e-6f, 3000, 7);
+        REQUIRE(rays.size() == 3000);
+        for (const Ray& ray : rays) CHECK(std::abs(glm::length(ray.dir) - 1.0f) < 1e-5f);
+    }
+    const Vec3 far = 1e9f * Vec3(1, -1, 1);
+    CHECK_THROWS_AS(rays_from_inside(closed_sphere(2, far, 1.0f), far, 1.0f, 3000, 7), std::invalid_argument);
+}
+
 // Planes are stored relative to a frame at each tree's centre and the ray's origin translated to it (PlaneFrame):
-// small spheres far out, in every kernel width. (rays_from_inside aims a third of its rays at points within 1 of
-// their origin, which float cannot tell apart from the origin beyond about 1e8.)
+// small spheres far out, in every kernel width.
 TEST_CASE("robust watertight kernels never leak from a small sphere far from the origin, in every width", "[accuracy]") {
     AccuracyOptions options;
     options.rays = 20000;
