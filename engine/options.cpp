@@ -7,12 +7,13 @@
 
 namespace canopy {
 
-std::string builder_names() {
+std::string builder_names(bool with_auto) {
     std::string names = "a name, or NAME:key=value,key=value with its parameters";
     for (const BuilderName& b : all_builders()) {
         names += "\n  " + b.name + ": " + b.description;
         if (is_bvh_builder(b.name)) names += builder_params_help(find_builder(b.name));
     }
+    if (!with_auto) return names;
     return names + "\n  auto: candidates built and timed on a sample of the frame, for --frames-planned";
 }
 

@@ -11,8 +11,9 @@
 
 namespace canopy {
 
-// Every registered builder's name, for the options' help.
-std::string builder_names();
+// Every registered builder's name, for the options' help; `with_auto` adds auto, for the commands that render frames
+// it can time its candidates on.
+std::string builder_names(bool with_auto = true);
 // --blas-builder names the object trees' builder, which only two-level top levels have.
 void check_blas_builder(const std::string& blas, const std::vector<std::string>& toplevels);
 

@@ -203,7 +203,12 @@ void register_accuracy(CLI::App& canopy) {
     auto p = std::make_shared<Parsed>();
     AccuracyOptions& ac = p->options;
     CLI::App* accuracy = canopy.add_subcommand("accuracy", "Leaks and hit-distance error of every intersector and traversal mode, scaled and moved");
-    accuracy->add_option("--builder", ac.builder, "Builder (of a BVH, or kdtree: a kd-tree): " + builder_names())->capture_default_str();
+    accuracy->add_option("--builder", ac.builder, "Builder (of a BVH, or kdtree: a kd-tree): " + builder_names(false))
+        ->check([](const std::string& builder) {
+            return builder == "auto" ? std::string("auto times its candidates on frames; accuracy traces no frames: name a builder")
+                                     : std::string();
+        })
+        ->capture_default_str();
     accuracy->add_option("--kernel", ac.kernel, "Kernel: auto (widest), bvh2, bvh4, bvh8")->capture_default_str();
     accuracy->add_option("--rays", ac.rays, "Rays per case and mode")->check(CLI::Range(1, 100000000))->capture_default_str();
     accuracy->add_option("--json", ac.json_path, "Write the rows as JSON");

@@ -462,7 +462,7 @@ void register_study(CLI::App& canopy) {
     auto size = std::make_shared<std::vector<int>>(std::vector<int>{st->width, st->height});
     CLI::App* study = canopy.add_subcommand("study", "SAH, EPO and LCV against measured ns/ray for every builder (Aila et al. 2013)");
     study->add_option("scenes", st->scenes, "Scenes: scene.json, .obj, .gltf, .glb or gen:NAME?tris=N&seed=S")->required();
-    study->add_option("--builder", st->builders, "Builders (default: every BVH builder): " + builder_names())->delimiter(',');
+    study->add_option("--builder", st->builders, "Builders (default: every BVH builder): " + builder_names(false))->delimiter(',');
     study->add_option("--size", *size, "Width and height of the frame whose diffuse rays are timed")
         ->expected(2)->check(CLI::Range(1, 16384))->capture_default_str();
     study->add_option("--repeats", st->repeats, "Timing passes per tree (fastest kept)")->check(CLI::Range(1, 100))->capture_default_str();

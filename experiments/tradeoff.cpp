@@ -91,12 +91,13 @@ std::vector<float> converged_reference(const TradeoffOptions& o, const FlatScene
 
 Curve measure(Accelerator& accel, const TradeoffOptions& o, const ShadingScene& shading, const PinholeCamera& camera,
               const std::vector<float>& reference) {
-    Curve curve{accel.library() == "embree" ? "embree " + accel.quality() : accel.builder() + " " + accel.kernel()};
     Image image(o.width, o.height);
     auto start = Clock::now();
     accel.prepare();
     accel.build();
     double elapsed = seconds_since(start);
+    const std::string chosen = accel.chosen().empty() ? "" : "(" + accel.chosen() + ")";  // auto's choice
+    Curve curve{accel.library() == "embree" ? "embree " + accel.quality() : accel.builder() + chosen + " " + accel.kernel()};
     curve.build_ms = 1e3 * elapsed;
     // At least one frame, even when the build alone used the budget: a curve needs a point.
     for (int frame = 1; frame <= o.max_frames && (frame == 1 || elapsed < o.seconds); ++frame) {
@@ -168,19 +169,22 @@ void write_outputs(const std::vector<Curve>& curves, const std::vector<double>& 
 // Under a job of several ranks, they share the reference's samples; the curves, which time one process, are
 // rank 0's alone.
 void run_tradeoff(const TradeoffOptions& o) {
+    FrameSettings settings;
+    settings.width = o.width, settings.height = o.height, settings.max_bounces = o.bounces;
+    settings.material_albedo = o.material_albedo;
     Scene scene;
     FlatScene flat;
     std::vector<std::unique_ptr<Accelerator>> accels;  // made first, so bad names fail before any rendering
     distributed::checked([&] {
         scene = load_scene(o.scene);
         flat = flatten(scene);
-        for (const std::string& builder : o.builders) accels.push_back(make_canopy_accelerator(flat, {builder, "", o.kernel}));
+        for (const std::string& builder : o.builders) {
+            CanopyOptions options{builder, "", o.kernel};
+            if (builder == "auto") options.auto_sample = frame_sample(scene, flat, settings);  // the curve's own frames
+            accels.push_back(make_canopy_accelerator(scene, flat, options));
+        }
         for (const std::string& quality : o.embree_qualities) accels.push_back(make_embree_accelerator(flat, quality, 0));
     });
-
-    FrameSettings settings;
-    settings.width = o.width, settings.height = o.height, settings.max_bounces = o.bounces;
-    settings.material_albedo = o.material_albedo;
     const ShadingScene shading{flat, settings};
     const PinholeCamera camera(scene_camera(scene, flat), o.width, o.height);
     const std::vector<float> reference = converged_reference(o, flat, shading, camera);
