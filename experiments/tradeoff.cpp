@@ -84,7 +84,7 @@ std::vector<float> converged_reference(const TradeoffOptions& o, const FlatScene
     distributed::checked([&] {
         if (!distributed::is_root()) return;
         reference = image.sums.average(o.reference_spp);
-        write_exr(path, o.width, o.height, reference);
+        write_image(path, o.width, o.height, reference);
     });
     return reference;
 }
