@@ -1,4 +1,5 @@
 #include "experiments/bench.h"
+#include "base/output_path.h"
 #include "experiments/embree_accelerator.h"
 
 #include "accel/builder.h"
@@ -718,6 +719,7 @@ BenchOptions parsed_options(const BenchCommand& c) {
     distributed::checked([&] {
         if (c.rebraid_option->count() && !contains_name(b.toplevels, "rebraid"))
             throw std::invalid_argument("--rebraid-threshold: only with --toplevel rebraid");
+        if (!b.json_path.empty() && distributed::is_root()) check_output_path("--json", b.json_path);
         b.builders = join_builder_specs(b.builders), b.blas_builders = join_builder_specs(b.blas_builders);
         if (c.esc_option->count()) apply_param_alias("--esc-sa-max", "esc", kEscSaMaxKey, c.esc_area_limits, b);
         if (c.alpha_option->count()) apply_param_alias("--sbvh-alpha", "sbvh", "alpha", c.alpha_values, b);

@@ -1,4 +1,5 @@
 #include "experiments/tradeoff.h"
+#include "base/output_path.h"
 #include "experiments/embree_accelerator.h"
 
 #include "renderer/frames.h"
@@ -228,6 +229,8 @@ void register_tradeoff(CLI::App& canopy) {
         o.builders = join_builder_specs(o.builders);
         if (p->accels.empty()) o.embree_qualities.clear();
         else if (o.embree_qualities.empty()) o.embree_qualities = {"medium"};
+        // The stem's first file stands for all four: they share its folder.
+        distributed::checked([&] { if (distributed::is_root()) check_output_path("-o", o.output + ".json"); });
         const auto limit = limit_threads(p->threads);
         run_tradeoff(o);
     });

@@ -34,6 +34,9 @@ private:
     std::vector<float> rgb_;
 };
 
+// The extensions write_image takes (render -o checks them before rendering).
+inline const std::vector<std::string> kImageExtensions = {".exr", ".png", ".jpg", ".jpeg"};
+
 // Writes linear RGB through OpenImageIO, the format by the path's extension: an EXR as linear floats; a PNG or JPEG
 // in 8 bits through the sRGB transfer curve, which viewers assume of them. Throws std::runtime_error naming the
 // path on failure.
