@@ -163,7 +163,7 @@ void register_render(CLI::App& canopy) {
         ->check(CLI::Range(1, 1 << 24))->capture_default_str();
     render->add_option("--batch-traversal", r->batch_traversal, kBatchTraversalHelp)
         ->check(CLI::IsMember({"single", "packet", "stream"}))->capture_default_str();
-    render->add_option("--memory-limit", r->memory_limit, kMemoryLimitHelp)->transform(CLI::AsSizeValue(false));
+    add_memory_limit_option(*render, r->memory_limit);
     render->add_option("--collapse", r->collapse, kCollapseHelp)->check(CLI::IsMember({"optimal", "greedy", "direct"}));
     render->add_option("--layout", r->layout, kLayoutHelp)->check(CLI::IsMember({"standard", "compressed"}))->capture_default_str();
     render->callback([r] {

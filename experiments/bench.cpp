@@ -684,7 +684,7 @@ void add_protocol_options(CLI::App& bench, BenchCommand& c) {
                           "and render are timed. An object or mesh name, a placement index, or auto (alone: the largest "
                           "object spanning at most a quarter of the scene); --builds is then 1")
             ->expected(0, 1)->default_str("auto");
-    bench.add_option("--memory-limit", b.memory_limit, kMemoryLimitHelp)->transform(CLI::AsSizeValue(false));
+    add_memory_limit_option(bench, b.memory_limit);
     bench.add_option("--size", c.size, "Width and height")->expected(2)->check(CLI::Range(1, 16384))->capture_default_str();
 }
 
