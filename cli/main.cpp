@@ -91,7 +91,7 @@ int main(int argc, char** argv) {
         return code == 0 ? 0 : kUsageError;  // --help and --version are ParseErrors of code 0
     } catch (const distributed::JobError& e) {  // known to every rank: rank 0 says it
         if (distributed::is_root()) std::fprintf(stderr, "canopy: error: %s\n", e.what());
-        return kRunError;
+        return e.usage ? kUsageError : kRunError;
     } catch (const std::exception& e) {
         std::fprintf(stderr, "canopy: error: %s%s\n", e.what(), distributed::where().c_str());
         const int code = dynamic_cast<const std::invalid_argument*>(&e) ? kUsageError : kRunError;
