@@ -15,6 +15,7 @@
 #include <cstdio>
 #include <cstring>
 #include <functional>
+#include <stdexcept>
 #include <string>
 
 namespace {
@@ -49,6 +50,15 @@ std::string command_line(int argc, char** argv) {
     return command;
 }
 
+// One convention for every command, stated in the top-level --help: 2 when the command line is at fault (an unknown or
+// malformed option, or options a command cannot act on, which commands throw as std::invalid_argument before any
+// work), 1 when the input or the run is (a scene that cannot be read, a write that fails). CLI11's own codes (105,
+// 106, 109, ...) told a script nothing it could act on.
+constexpr int kRunError = 1, kUsageError = 2;
+constexpr const char* kExitCodes =
+    "Exit status: 0 done; 1 an input or run error (a scene that cannot be read, a failed write); 2 a usage error (an\n"
+    "unknown, malformed or contradicting option, an output path that cannot be written).";
+
 // The project version and the commit the build was configured at, when it was configured in a git checkout.
 std::string version_text() {
     const std::string commit = CANOPY_GIT_COMMIT;
@@ -63,6 +73,7 @@ int main(int argc, char** argv) {
     CLI::App app{"canopy: a CPU ray tracer with pluggable BVH builders, measured against Embree"};
     app.set_version_flag("--version", version_text());
     app.require_subcommand(0, 1);
+    app.footer(kExitCodes);
     const std::string command = command_line(argc, argv);
     const std::function<void(CLI::App&)> subcommands[] = {
         register_render, register_bench, register_study, register_tradeoff, register_accuracy,
@@ -73,18 +84,20 @@ int main(int argc, char** argv) {
         app.parse(argc, argv);  // runs the chosen subcommand once its options are parsed
         if (app.get_subcommands().empty()) {
             if (distributed::is_root()) std::fprintf(stderr, "%s", app.help().c_str());
-            return 1;
+            return kUsageError;
         }
     } catch (const CLI::ParseError& e) {  // every rank parses the same arguments: one says what is wrong
-        return distributed::is_root() ? app.exit(e) : e.get_exit_code();
+        const int code = distributed::is_root() ? app.exit(e) : e.get_exit_code();
+        return code == 0 ? 0 : kUsageError;  // --help and --version are ParseErrors of code 0
     } catch (const distributed::JobError& e) {  // known to every rank: rank 0 says it
         if (distributed::is_root()) std::fprintf(stderr, "canopy: error: %s\n", e.what());
-        return 1;
+        return e.usage ? kUsageError : kRunError;
     } catch (const std::exception& e) {
         std::fprintf(stderr, "canopy: error: %s%s\n", e.what(), distributed::where().c_str());
+        const int code = dynamic_cast<const std::invalid_argument*>(&e) ? kUsageError : kRunError;
         // Other ranks may be waiting for this one: end them too.
-        if (distributed::ranks() > 1) distributed::abort_job(1);
-        return 1;
+        if (distributed::ranks() > 1) distributed::abort_job(code);
+        return code;
     }
     return 0;
 }

@@ -1,4 +1,5 @@
 #include "cli/render.h"
+#include "base/output_path.h"
 #include "experiments/embree_accelerator.h"
 #include "engine/options.h"
 #include "renderer/progress.h"
@@ -115,7 +116,7 @@ void run_render(RenderOptions o) {
     if (terminal) std::fprintf(stderr, "\n");
     const double render_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - render_start).count();
     distributed::checked([&] {
-        if (distributed::is_root()) write_exr(o.output, o.size[0], o.size[1], image.sums.average(o.spp));
+        if (distributed::is_root()) write_image(o.output, o.size[0], o.size[1], image.sums.average(o.spp));
     });
     if (!distributed::is_root()) return;
     const std::string ranks = distributed::ranks() > 1 ? " on " + std::to_string(distributed::ranks()) + " ranks" : "";
@@ -133,7 +134,7 @@ void register_render(CLI::App& canopy) {
     auto r = std::make_shared<RenderOptions>();
     CLI::App* render = canopy.add_subcommand("render", "Render a scene to an EXR");
     render->add_option("scene", r->scene, "Scene: scene.json, .obj, .gltf, .glb or gen:NAME?tris=N&seed=S (default: embedded scene)");
-    render->add_option("-o,--output", r->output, "Output EXR")->capture_default_str();
+    render->add_option("-o,--output", r->output, "Output image: .exr (linear), .png or .jpg (sRGB); --heatmap: .exr")->capture_default_str();
     render->add_option("--spp", r->spp, "Samples (frames) per pixel")->check(CLI::Range(1, 1 << 20))->capture_default_str();
     render->add_option("--size", r->size, "Width and height")->expected(2)->check(CLI::Range(1, 16384))->capture_default_str();
     render->add_option("--builder", r->builder, "Builder (of a BVH, or kdtree: a kd-tree): " + builder_names())->capture_default_str();
@@ -165,10 +166,14 @@ void register_render(CLI::App& canopy) {
         ->check(CLI::IsMember({"single", "packet", "stream"}))->capture_default_str();
     render->add_option("--stream-batches", r->stream_batching, kStreamBatchingHelp)
         ->check(CLI::IsMember({"measured", "wavefront", "paths"}))->capture_default_str();
-    render->add_option("--memory-limit", r->memory_limit, kMemoryLimitHelp)->transform(CLI::AsSizeValue(false));
+    add_memory_limit_option(*render, r->memory_limit);
     render->add_option("--collapse", r->collapse, kCollapseHelp)->check(CLI::IsMember({"optimal", "greedy", "direct"}));
     render->add_option("--layout", r->layout, kLayoutHelp)->check(CLI::IsMember({"standard", "compressed"}))->capture_default_str();
     render->callback([r] {
+        // Checked by rank 0, which writes it; a heatmap is an EXR of counts with its PNG beside.
+        distributed::checked([&] {
+            if (distributed::is_root()) check_output_path("-o", r->output, r->heatmap ? std::vector<std::string>{".exr"} : kImageExtensions);
+        });
         const auto limit = limit_threads(r->threads);
         run_render(*r);
     });

@@ -35,6 +35,11 @@ def diffuse_rays(vertices, triangles, count, seed):
     return origins.astype(np.float32), directions.astype(np.float32)
 
 
+def figure(value, width, decimals):
+    """The value in a column of `width`, or "-" where the tree has no such figure (lbvh's direct wide tree: no SAH)."""
+    return f"{'-':>{width}}" if value is None else f"{value:{width}.{decimals}f}"
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("scene", help=".obj, .gltf, scene.json or gen:NAME?tris=N")
@@ -53,7 +58,7 @@ def main():
         start = time.perf_counter()
         triangle = accel.intersect(origins, directions)[1]
         seconds = time.perf_counter() - start
-        print(f"{builder:>15} {stats['build_ms']:10.1f} {stats['sah']:9.2f} {args.rays / seconds / 1e6:9.2f} "
+        print(f"{builder:>15} {stats['build_ms']:10.1f} {figure(stats['sah'], 9, 2)} {args.rays / seconds / 1e6:9.2f} "
               f"{int((triangle >= 0).sum()):9d}")
 
 

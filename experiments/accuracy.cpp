@@ -1,4 +1,5 @@
 #include "experiments/accuracy.h"
+#include "base/output_path.h"
 
 #include "engine/options.h"
 #include "experiments/command.h"
@@ -215,8 +216,11 @@ void register_accuracy(CLI::App& canopy) {
     accuracy->add_option("--plot", ac.plot_path, "Write a PNG: distance error against coordinate magnitude");
     accuracy->add_option("--threads", p->threads, "Threads (0: all)")->check(CLI::Range(0, 4096));
     accuracy->callback([p] {
+        if (!distributed::is_root()) return;  // not split: under a job, rank 0's alone
+        if (!p->options.json_path.empty()) check_output_path("--json", p->options.json_path);
+        if (!p->options.plot_path.empty()) check_output_path("--plot", p->options.plot_path, {".png"});
         const auto limit = limit_threads(p->threads);
-        if (distributed::is_root()) run_accuracy(p->options);  // not split: under a job, rank 0's alone
+        run_accuracy(p->options);
     });
 }
 

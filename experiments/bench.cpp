@@ -1,4 +1,5 @@
 #include "experiments/bench.h"
+#include "base/output_path.h"
 #include "experiments/embree_accelerator.h"
 
 #include "accel/builder.h"
@@ -694,7 +695,7 @@ void add_protocol_options(CLI::App& bench, BenchCommand& c) {
                           "and render are timed. An object or mesh name, a placement index, or auto (alone: the largest "
                           "object spanning at most a quarter of the scene); --builds is then 1")
             ->expected(0, 1)->default_str("auto");
-    bench.add_option("--memory-limit", b.memory_limit, kMemoryLimitHelp)->transform(CLI::AsSizeValue(false));
+    add_memory_limit_option(bench, b.memory_limit);
     bench.add_option("--size", c.size, "Width and height")->expected(2)->check(CLI::Range(1, 16384))->capture_default_str();
 }
 
@@ -729,6 +730,7 @@ BenchOptions parsed_options(const BenchCommand& c) {
     distributed::checked([&] {
         if (c.rebraid_option->count() && !contains_name(b.toplevels, "rebraid"))
             throw std::invalid_argument("--rebraid-threshold: only with --toplevel rebraid");
+        if (!b.json_path.empty() && distributed::is_root()) check_output_path("--json", b.json_path);
         b.builders = join_builder_specs(b.builders), b.blas_builders = join_builder_specs(b.blas_builders);
         if (c.esc_option->count()) apply_param_alias("--esc-sa-max", "esc", kEscSaMaxKey, c.esc_area_limits, b);
         if (c.alpha_option->count()) apply_param_alias("--sbvh-alpha", "sbvh", "alpha", c.alpha_values, b);

@@ -3,7 +3,9 @@
 // adds the options and the callback that runs it once they are parsed (main.cpp lists them).
 #include <tbb/global_control.h>
 
+#include <cstdint>
 #include <memory>
+#include <optional>
 
 namespace CLI {
 class App;
@@ -21,9 +23,9 @@ inline constexpr const char* kCollapseHelp =
     "How bvh4/bvh8 are made from the binary tree: optimal (Ylitie et al. 2017), greedy (largest area first), or, for "
     "builder lbvh, direct (no binary tree: the wide tree straight from the Morton codes, largest weight first). "
     "Default: direct for lbvh's flat bvh4/bvh8 (its fast build), optimal for every other tree";
-inline constexpr const char* kMemoryLimitHelp =
-    "Refuse scenes whose estimated peak memory (scene, PrimRefs, trees) exceeds these bytes (suffixes k, M, G: "
-    "powers of 1024); the bound is otherwise the memory the machine and its cgroup have available";
+
+// Adds --memory-limit BYTES (render, bench): the bound on a scene's estimated peak memory, refused at zero or below.
+void add_memory_limit_option(CLI::App& command, std::optional<uint64_t>& bytes);
 
 // Every library's threads capped at `threads` while the result lives (0: no cap, nullptr).
 inline std::unique_ptr<tbb::global_control> limit_threads(int threads) {

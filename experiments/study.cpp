@@ -1,4 +1,5 @@
 #include "experiments/study.h"
+#include "base/output_path.h"
 
 #include "accel/builder.h"
 #include "renderer/frames.h"
@@ -475,6 +476,9 @@ void register_study(CLI::App& canopy) {
         distributed::checked([&] {
             st->builders = join_builder_specs(st->builders);
             for (const std::string& b : st->builders) check_builder_name(b);  // unknown names fail before any work
+            if (!distributed::is_root()) return;  // rank 0 writes the report
+            if (!st->json_path.empty()) check_output_path("--json", st->json_path);
+            if (!st->plot_path.empty()) check_output_path("--plot", st->plot_path, {".png"});
         });
         st->width = (*size)[0], st->height = (*size)[1];
         run_study(*st);

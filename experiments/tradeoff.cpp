@@ -1,4 +1,5 @@
 #include "experiments/tradeoff.h"
+#include "base/output_path.h"
 #include "experiments/embree_accelerator.h"
 
 #include "renderer/frames.h"
@@ -84,7 +85,7 @@ std::vector<float> converged_reference(const TradeoffOptions& o, const FlatScene
     distributed::checked([&] {
         if (!distributed::is_root()) return;
         reference = image.sums.average(o.reference_spp);
-        write_exr(path, o.width, o.height, reference);
+        write_image(path, o.width, o.height, reference);
     });
     return reference;
 }
@@ -232,6 +233,8 @@ void register_tradeoff(CLI::App& canopy) {
         o.builders = join_builder_specs(o.builders);
         if (p->accels.empty()) o.embree_qualities.clear();
         else if (o.embree_qualities.empty()) o.embree_qualities = {"medium"};
+        // The stem's first file stands for all four: they share its folder.
+        distributed::checked([&] { if (distributed::is_root()) check_output_path("-o", o.output + ".json"); });
         const auto limit = limit_threads(p->threads);
         run_tradeoff(o);
     });

@@ -30,11 +30,14 @@ std::string host();  // this process's host name
 // " (rank R on HOST)" in a job of several ranks, "" in one process: appended to what a rank reports.
 std::string where();
 
-// An error that one rank raised, known to every rank of the job (thrown by `checked` on all of them).
+// An error that one rank raised, known to every rank of the job (thrown by `checked` on all of them). `usage`: it
+// was a std::invalid_argument there, an option at fault, which the command exits on with its usage status.
 class JobError : public std::runtime_error {
 public:
-    JobError(int failed_rank, const std::string& message) : std::runtime_error(message), failed_rank(failed_rank) {}
+    JobError(int failed_rank, const std::string& message, bool usage)
+        : std::runtime_error(message), failed_rank(failed_rank), usage(usage) {}
     int failed_rank;
+    bool usage;
 };
 
 // Runs `work` on every rank, then agrees whether it failed anywhere: if it threw on any rank, every rank throws

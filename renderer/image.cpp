@@ -1,9 +1,12 @@
 #include "renderer/image.h"
+#include "base/output_path.h"
 
 #include <OpenImageIO/imagebuf.h>
 #include <OpenImageIO/imagebufalgo.h>
 #include <OpenImageIO/imageio.h>
 
+#include <algorithm>
+#include <cmath>
 #include <stdexcept>
 
 namespace canopy {
@@ -33,13 +36,30 @@ double Image::mean(int samples) const {
     return rgb_.empty() || samples <= 0 ? 0.0 : sum / double(rgb_.size()) / double(samples);
 }
 
-void write_exr(const std::string& path, int width, int height, const std::vector<float>& rgb) {
+namespace {
+
+// IEC 61966-2-1's curve from linear light to the sRGB code value, both in [0, 1].
+float srgb_encoded(float linear) {
+    const float v = std::clamp(linear, 0.0f, 1.0f);
+    return v <= 0.0031308f ? 12.92f * v : 1.055f * std::pow(v, 1.0f / 2.4f) - 0.055f;
+}
+
+}  // namespace
+
+void write_image(const std::string& path, int width, int height, const std::vector<float>& rgb) {
     auto out = OIIO::ImageOutput::create(path);
     if (!out) throw std::runtime_error(path + ": cannot create image output: " + OIIO::geterror());
-    OIIO::ImageSpec spec(width, height, 3, OIIO::TypeDesc::FLOAT);
-    spec.attribute("compression", "zip");
-    if (!out->open(path, spec) || !out->write_image(OIIO::TypeDesc::FLOAT, rgb.data()) || !out->close())
-        throw std::runtime_error(path + ": cannot write EXR: " + out->geterror());
+    const bool display = lower_extension(path) != ".exr";  // a PNG or JPEG: 8-bit sRGB
+    OIIO::ImageSpec spec(width, height, 3, display ? OIIO::TypeDesc::UINT8 : OIIO::TypeDesc::FLOAT);
+    std::vector<float> pixels = rgb;
+    if (display) {
+        std::transform(pixels.begin(), pixels.end(), pixels.begin(), srgb_encoded);
+        spec.attribute("oiio:ColorSpace", "sRGB");
+    } else {
+        spec.attribute("compression", "zip");
+    }
+    if (!out->open(path, spec) || !out->write_image(OIIO::TypeDesc::FLOAT, pixels.data()) || !out->close())
+        throw std::runtime_error(path + ": cannot write the image: " + out->geterror());
 }
 
 std::vector<float> read_exr(const std::string& path, int width, int height) {

@@ -34,10 +34,15 @@ private:
     std::vector<float> rgb_;
 };
 
-// Writes a float RGB EXR through OpenImageIO; throws std::runtime_error naming the path on failure.
-void write_exr(const std::string& path, int width, int height, const std::vector<float>& rgb);
+// The extensions write_image takes (render -o checks them before rendering).
+inline const std::vector<std::string> kImageExtensions = {".exr", ".png", ".jpg", ".jpeg"};
 
-// Reads an RGB EXR written by write_exr; throws std::runtime_error naming the path when it cannot be read or
+// Writes linear RGB through OpenImageIO, the format by the path's extension: an EXR as linear floats; a PNG or JPEG
+// in 8 bits through the sRGB transfer curve, which viewers assume of them. Throws std::runtime_error naming the
+// path on failure.
+void write_image(const std::string& path, int width, int height, const std::vector<float>& rgb);
+
+// Reads an RGB EXR written by write_image; throws std::runtime_error naming the path when it cannot be read or
 // is not width x height x 3.
 std::vector<float> read_exr(const std::string& path, int width, int height);
 

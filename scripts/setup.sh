@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Installs the Debian packages canopy needs (only those missing), then configures and builds the
 # Release preset (-O3, host ISA) into build/. Idempotent: a second run installs and rebuilds nothing new.
+# usage: scripts/setup.sh [TARGET...]   (the named targets only, as render.sh's `canopy`; none: every target)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -24,4 +25,6 @@ if [ ${#missing[@]} -gt 0 ]; then
 fi
 
 cmake --preset release >/dev/null
-cmake --build --preset release -j "$(nproc)"
+targets=()
+[ $# -gt 0 ] && targets=(--target "$@")
+cmake --build --preset release -j "$(nproc)" "${targets[@]}"

@@ -5,7 +5,8 @@
 #   study:     two ranks' study of three scenes gives the rows of three one-process studies (the deterministic
 #              columns: builder and tree metrics, not timings), each row naming its host;
 #   bad_scene: a scene that fails on rank 1 alone ends the job within 30 s (CANOPY_MPI_TIMEOUT), non-zero, with
-#              rank 1's message once.
+#              rank 1's message once;
+#   usage:     an option error that every rank finds exits 2, as in one process (cli/main.cpp), with one message.
 # usage: mpi_checks.sh CHECK CANOPY MPIEXEC PYTHON WORK_DIR
 set -uo pipefail
 check=$1 canopy=$2 mpiexec=$3 python=$4 work=$5
@@ -67,6 +68,14 @@ PY
     grep -qF "tris" <<<"$output" || fail "no message naming the generator's field"
     [ "$(grep -c 'canopy: error:.*(rank 1 on ' <<<"$output")" -eq 1 ] || fail "not one error message from rank 1"
     echo "ok: exit $status after $(( $(date +%s) - start )) s"
+    ;;
+  usage)
+    output=$("${mpirun[@]}" "$canopy" bench 'gen:box?tris=200' --esc-sa-max 8x 2>&1)
+    status=$?
+    echo "$output"
+    [ "$status" -eq 2 ] || fail "exit $status, not 2"
+    [ "$(grep -c 'canopy: error: --esc-sa-max: only with --builder esc' <<<"$output")" -eq 1 ] || fail "not one error message"
+    echo "ok: exit 2"
     ;;
   *) fail "unknown check '$check'" ;;
 esac

@@ -212,7 +212,7 @@ TEST_CASE("EXR output holds the rendered values", "[render]") {
     const std::string path = (std::filesystem::temp_directory_path() / "canopy_test_output.exr").string();
     std::vector<float> rgb(8 * 4 * 3);
     for (size_t i = 0; i < rgb.size(); ++i) rgb[i] = float(i) * 0.25f;
-    write_exr(path, 8, 4, rgb);
+    write_image(path, 8, 4, rgb);
     auto in = OIIO::ImageInput::open(path);
     REQUIRE(in);
     CHECK(in->spec().width == 8);
@@ -220,9 +220,37 @@ TEST_CASE("EXR output holds the rendered values", "[render]") {
     std::vector<float> back(rgb.size());
     REQUIRE(in->read_image(0, 0, 0, 3, OIIO::TypeDesc::FLOAT, back.data()));
     CHECK(back == rgb);
-    CHECK_THROWS_WITH(write_exr("/nonexistent-dir/x.exr", 8, 4, rgb), Catch::Contains("/nonexistent-dir/x.exr"));
+    CHECK_THROWS_WITH(write_image("/nonexistent-dir/x.exr", 8, 4, rgb), Catch::Contains("/nonexistent-dir/x.exr"));
     CHECK(read_exr(path, 8, 4) == rgb);  // the tradeoff command's cached reference
     CHECK_THROWS_WITH(read_exr(path, 4, 8), Catch::Contains("expected 4x8"));
+}
+
+namespace {
+
+// The 8-bit code values of the first pixel of an image file.
+std::vector<int> first_pixel_codes(const std::string& path) {
+    auto in = OIIO::ImageInput::open(path);
+    REQUIRE(in);
+    std::vector<unsigned char> pixels(size_t(in->spec().image_pixels()) * 3);
+    REQUIRE(in->read_image(0, 0, 0, 3, OIIO::TypeDesc::UINT8, pixels.data()));
+    return {pixels[0], pixels[1], pixels[2]};
+}
+
+}  // namespace
+
+TEST_CASE("PNG and JPEG output carries the sRGB curve, EXR stays linear", "[render]") {
+    // Linear 0.5 is sRGB 0.7354, code 188 of 255; written linearly it would be 128. JPEG is lossy: within 2.
+    for (const char* name : {"canopy_test_srgb.png", "canopy_test_srgb.JPG"}) {
+        const std::string path = (std::filesystem::temp_directory_path() / name).string();
+        write_image(path, 8, 4, std::vector<float>(8 * 4 * 3, 0.5f));
+        CAPTURE(name);
+        for (int code : first_pixel_codes(path)) CHECK(std::abs(code - 188) <= 2);
+    }
+    const std::string path = (std::filesystem::temp_directory_path() / "canopy_test_clamped.png").string();
+    std::vector<float> rgb(8 * 4 * 3, 0.5f);
+    rgb[0] = 2.0f, rgb[1] = -1.0f;  // beyond the range: clamped, not wrapped
+    write_image(path, 8, 4, rgb);
+    CHECK(first_pixel_codes(path) == std::vector<int>{255, 0, 188});
 }
 
 TEST_CASE("RMSE against a reference is the root of the mean squared difference", "[render]") {

@@ -1,4 +1,5 @@
 #include "experiments/papers/reproduce.h"
+#include "base/output_path.h"
 
 #include "renderer/distributed.h"
 
@@ -152,7 +153,10 @@ void register_reproduce(CLI::App& canopy, const std::string& command_line) {
     reproduce->add_option("--out", rp->out_dir, "Folder of PAPER.md and PAPER.json")->capture_default_str();
     reproduce->add_option("--scenes-dir", rp->scenes_dir, "Folder of the shared scenes")->capture_default_str();
     reproduce->add_option("--scenes", rp->scenes, "Your scenes instead of the paper's (no paper figures beside them)")->delimiter(',');
-    reproduce->callback([rp] { run_reproduce(*rp); });
+    reproduce->callback([rp] {
+        distributed::checked([&] { if (distributed::is_root()) check_output_folder("--out", rp->out_dir); });
+        run_reproduce(*rp);
+    });
 }
 
 }  // namespace canopy

@@ -67,17 +67,22 @@ std::string where() { return ranks() > 1 ? " (rank " + std::to_string(rank()) + 
 void checked(const std::function<void()>& work) {
     if (ranks() == 1) return work();
     std::string error;
+    int usage = 0;
     try {
         work();
     } catch (const JobError&) {
         throw;  // every rank has it already: agreeing again would wait for ranks that are not coming
     } catch (const std::exception& e) {
         error = e.what() + where();
+        usage = dynamic_cast<const std::invalid_argument*>(&e) != nullptr;
     }
     const int mine = error.empty() ? ranks() : rank();
     int first = ranks();
     MPI_Allreduce(&mine, &first, 1, MPI_INT, MPI_MIN, MPI_COMM_WORLD);
-    if (first < ranks()) throw JobError(first, broadcast_text(error, first));
+    if (first == ranks()) return;
+    error = broadcast_text(error, first);
+    MPI_Bcast(&usage, 1, MPI_INT, first, MPI_COMM_WORLD);
+    throw JobError(first, error, usage != 0);
 }
 
 bool broadcast_from_root(bool value) {
