@@ -49,6 +49,20 @@ struct BvhKernel {
         corners = nearest.triangle();
         return true;
     }
+    // A two-level tree's likewise, a transformed instance's corners taken to world space: shading's point and normal
+    // then round differently from the flat scene's copy by a few ulps (statistics agree, not bits).
+    bool closest(const Ray& ray, Hit& hit, Triangle& corners) const
+        requires std::is_same_v<Layout, TwoLevelBvh<kWidth>>
+    {
+        NearestPlacedCorners<kWidth> nearest;
+        if (!traverse<Query::Closest, Robust, TriangleTest>(bvh, ray, hit, nearest)) return false;
+        corners = nearest.triangle();
+        if (nearest.instance != kWorldSpace) {
+            const glm::mat4& m = bvh.to_world[nearest.instance];
+            corners = {Vec3(m * glm::vec4(corners.v0, 1.0f)), Vec3(m * glm::vec4(corners.v1, 1.0f)), Vec3(m * glm::vec4(corners.v2, 1.0f))};
+        }
+        return true;
+    }
     template <Query Q>
     void batch(std::span<const Ray> rays, std::span<Hit> hits, Scratch& scratch, BatchTraversal how) const {
         if constexpr (kBatches) {

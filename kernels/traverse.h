@@ -44,12 +44,16 @@ struct NoCount {
     void touch(const void*, size_t) {}
     template <class Leaf>
     void nearer_hit(const Leaf&, int) {}  // a leaf entry's triangle (the block's lane) became the nearest hit
+    void placed(uint32_t) {}  // two-level: the leaves from here on are instance i's (kWorldSpace: the world's)
 };
+
+constexpr uint32_t kWorldSpace = ~0u;
 
 // Counts nothing, but keeps the leaf entry of the nearest hit, which the traversal has just read: a renderer
 // that shades the hit reads its corners from there, in cache, rather than from the scene's triangle array, a
 // cache miss on every hit (docs/results.md#headline-binned-and-sbvh-against-embree). The corners are the scene
-// triangle's, bit for bit. Only for flat trees: a two-level tree's leaves hold triangles in their objects' space.
+// triangle's, bit for bit. In a two-level tree, the leaves of a transformed instance hold its object's triangles in
+// object space: NearestPlacedCorners keeps which instance that was.
 template <int N>
 struct NearestCorners : NoCount {
     const LeafOf<N>* entry = nullptr;
@@ -65,6 +69,14 @@ struct NearestCorners : NoCount {
     }
 };
 
+// NearestCorners in a two-level tree: also the instance whose object space the nearest hit's corners are in.
+template <int N>
+struct NearestPlacedCorners : NearestCorners<N> {
+    uint32_t current = kWorldSpace, instance = kWorldSpace;
+    void placed(uint32_t i) { current = i; }
+    void nearer_hit(const LeafOf<N>& e, int l) { NearestCorners<N>::nearer_hit(e, l), instance = current; }
+};
+
 // What a ray visited in the single-ray kernels, and the 64-byte cache lines its nodes and leaves span (the memory
 // a visit reads, whatever the layout: a BVH8 node is 4 lines, a block of 8 triangles 5).
 struct TraversalCounts {
@@ -78,6 +90,7 @@ struct TraversalCounts {
     }
     template <class Leaf>
     void nearer_hit(const Leaf&, int) {}
+    void placed(uint32_t) {}
     TraversalCounts& operator+=(const TraversalCounts& o) {
         inner_nodes += o.inner_nodes, leaf_nodes += o.leaf_nodes, triangle_tests += o.triangle_tests;
         cache_lines += o.cache_lines;

@@ -49,7 +49,9 @@ template <Query Q, bool Robust, class TriangleTest, int N, class Counter, class 
             const auto local_test = [&]() __attribute__((always_inline)) -> const TriangleTest& {
                 return local_tri.get(local);
             };
+            counter.placed(entry.instance);
             here = enter_object<Q>(bvh.pool, entry, local_box, local_test, tmin, hit, counter);
+            counter.placed(kWorldSpace);
         }
         if (here) hit.prim += instance.prim_offset;
         found |= here;

@@ -293,3 +293,39 @@ TEST_CASE("transformed boxes contain every transformed point", "[two-level]") {
         }
     }
 }
+
+// Shading reads the hit triangle's corners from the leaf the kernel has just read, as in a flat tree: a transformed
+// instance's taken to world space, an identity placement's as they are.
+TEST_CASE("two-level kernels hand over the hit triangle's world corners", "[two-level]") {
+    const Scene scene = instanced_scene();
+    const FlatScene flat = flatten(scene);
+    const std::vector<Ray> rays = random_rays(flat.triangles, 20000, 91);
+    const float tolerance = 1e-5f * glm::length(flat.bounds.extent());
+    for (const char* toplevel : {"two-level", "rebraid"}) {
+        for (const char* kernel : {"bvh2", "bvh8"}) {
+            INFO(toplevel << " " << kernel);
+            CanopyOptions options{"binned", "", kernel, true, true, toplevel};
+            auto accel = make_canopy_accelerator(scene, flat, options);
+            accel->prepare();
+            accel->build();
+            size_t hits = 0, far = 0;
+            std::visit([&]<class Kernel>(const Kernel& k) {
+                if constexpr (requires(Hit& hit, Triangle& corners) { k.closest(rays[0], hit, corners); }) {
+                    for (const Ray& ray : rays) {
+                        Hit hit;
+                        Triangle corners;
+                        if (!k.closest(ray, hit, corners)) continue;
+                        ++hits;
+                        const Triangle& t = flat.triangles[hit.prim];
+                        far += glm::distance(corners.v0, t.v0) > tolerance || glm::distance(corners.v1, t.v1) > tolerance ||
+                               glm::distance(corners.v2, t.v2) > tolerance;
+                    }
+                } else {
+                    FAIL("the two-level kernel hands over no corners");
+                }
+            }, accel->bound_kernel());
+            CHECK(hits > rays.size() / 4);
+            CHECK(far == 0);
+        }
+    }
+}
