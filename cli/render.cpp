@@ -109,13 +109,15 @@ void run_render(RenderOptions o) {
     const FrameSettings settings = frame_settings(o);
     const ShadingScene shading{p.flat, settings};
     const std::string what = "render " + (o.scene.empty() ? std::string("default scene") : o.scene) + ": ";
-    const auto on_progress = [&](float fraction) {
-        progress::update(what + std::to_string(int(fraction * 100.0f)) + "% of " + std::to_string(o.spp) + " spp");
+    const auto done = [&](float fraction) {
+        return what + std::to_string(int(fraction * 100.0f)) + "% of " + std::to_string(o.spp) + " spp";
     };
+    const auto on_progress = [&](float fraction) { progress::update(done(fraction)); };
     const auto render_start = std::chrono::steady_clock::now();
-    if (progress::shown()) progress::phase(what + "0% of " + std::to_string(o.spp) + " spp");
+    if (progress::shown()) progress::phase(done(0.0f));
     const SampledImage image = render_samples(*p.accel, shading, camera, 0, o.spp,
                                               progress::shown() ? on_progress : std::function<void(float)>());
+    if (progress::shown()) on_progress(1.0f);  // the tiles' reports may arrive out of order: the last may not be 100%
     progress::finish();
     const double render_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - render_start).count();
     distributed::checked([&] {
