@@ -16,11 +16,11 @@
 #include <tbb/info.h>
 
 #include <CLI/CLI.hpp>
-#include <unistd.h>
 
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
+#include <functional>
 #include <memory>
 #include <stdexcept>
 
@@ -108,12 +108,17 @@ void run_render(RenderOptions o) {
 
     const FrameSettings settings = frame_settings(o);
     const ShadingScene shading{p.flat, settings};
-    // One bar, rank 0's, when its stderr is a terminal. Open MPI hands ranks their stderr as a pipe (and stdout as
-    // a terminal even when mpirun's output goes to a file), so under mpirun there is none.
-    const bool terminal = distributed::is_root() && isatty(fileno(stderr));
+    const std::string what = "render " + (o.scene.empty() ? std::string("default scene") : o.scene) + ": ";
+    const auto done = [&](float fraction) {
+        return what + std::to_string(int(fraction * 100.0f)) + "% of " + std::to_string(o.spp) + " spp";
+    };
+    const auto on_progress = [&](float fraction) { progress::update(done(fraction)); };
     const auto render_start = std::chrono::steady_clock::now();
-    const SampledImage image = render_samples(*p.accel, shading, camera, 0, o.spp, terminal ? print_progress : nullptr);
-    if (terminal) std::fprintf(stderr, "\n");
+    if (progress::shown()) progress::phase(done(0.0f));
+    const SampledImage image = render_samples(*p.accel, shading, camera, 0, o.spp,
+                                              progress::shown() ? on_progress : std::function<void(float)>());
+    if (progress::shown()) on_progress(1.0f);  // the tiles' reports may arrive out of order: the last may not be 100%
+    progress::finish();
     const double render_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - render_start).count();
     distributed::checked([&] {
         if (distributed::is_root()) write_image(o.output, o.size[0], o.size[1], image.sums.average(o.spp));
@@ -150,6 +155,7 @@ void register_render(CLI::App& canopy) {
     render->add_option("--embree-quality", r->embree_quality, "low, medium or high")->capture_default_str();
     render->add_option("--bounces", r->bounces, "Maximum bounces")->check(CLI::Range(0, 1024))->capture_default_str();
     render->add_option("--threads", r->threads, "Threads for every library (0: all)")->check(CLI::Range(0, 4096));
+    render->add_flag("--quiet", r->quiet, kQuietHelp);
     render->add_flag("--materials", r->material_albedo,
                      "Use the materials: Kd or baseColorFactor as albedo, Ke or emissiveFactor as light (protocol: 0.8 grey, sky only)");
     render->add_flag("--heatmap", r->heatmap,
@@ -175,6 +181,7 @@ void register_render(CLI::App& canopy) {
             if (distributed::is_root()) check_output_path("-o", r->output, r->heatmap ? std::vector<std::string>{".exr"} : kImageExtensions);
         });
         const auto limit = limit_threads(r->threads);
+        progress::start(r->quiet);
         run_render(*r);
     });
 }

@@ -20,7 +20,7 @@ struct RenderOptions {
     std::string embree_quality = "medium";
     int spp = 1, threads = 0, bounces = 8;
     std::vector<int> size{1024, 768};
-    bool material_albedo = false, heatmap = false;
+    bool material_albedo = false, heatmap = false, quiet = false;  // quiet: no progress line
     std::string traversal = "robust", intersector = "watertight", collapse;  // collapse: empty for the builder's own
     std::string layout = "standard";     // bvh8 nodes: standard (floats) or compressed (8-bit planes)
     std::string tracer = "single";       // single (one path at a time) or stream (wavefront, sorted ray batches)

@@ -384,11 +384,21 @@ nlohmann::json to_json(const nlohmann::json& results, const BenchOptions& o, uin
             {"height", o.height}, {"bounces", o.bounces}, {"stream_paths", o.stream_paths}, {"results", results}};
 }
 
+// The progress line's text for a row's step: "bench SCENE, ROW: build 2 of 20".
+void show_progress(const std::string& scene, const Entry& e, const std::string& step, bool phase = false) {
+    if (!progress::shown()) return;
+    const std::string text = "bench " + scene + ", " + e.label() + ": " + step;
+    phase ? progress::phase(text) : progress::update(text);
+}
+
+std::string step_of(const char* step, int i, int n) { return std::string(step) + " " + std::to_string(i) + " of " + std::to_string(n); }
+
 // Builds every entry `builds` times, alternating between them; the minimum is reported.
-void build_all(std::vector<Entry>& entries, int builds) {
+void build_all(std::vector<Entry>& entries, int builds, const std::string& scene) {
     for (int round = 0; round < builds; ++round) {
         for (size_t i = 0; i < entries.size(); ++i) {
             if (!builds_its_accelerator(entries, i)) continue;
+            show_progress(scene, entries[i], step_of("build", round + 1, builds), round == 0 && i == 0);
             entries[i].accel->prepare();
             const auto start = Clock::now();
             entries[i].accel->build();
@@ -412,7 +422,8 @@ void move_all(std::vector<Entry>& entries, const DynamicObject& object, uint32_t
 
 // The first timed frame again, untimed, one ray at a time through the counting kernel, once per canopy accelerator
 // (its stream rows trace the same rays through the same tree).
-void count_visits(std::vector<Entry>& entries, const std::vector<ShadingScene>& shading, const PinholeCamera& camera) {
+void count_visits(std::vector<Entry>& entries, const std::vector<ShadingScene>& shading, const PinholeCamera& camera,
+                  const BenchOptions& o) {
     for (size_t i = 0; i < entries.size(); ++i) {
         Entry& e = entries[i];
         if (e.accel->library() != "canopy") continue;
@@ -420,6 +431,7 @@ void count_visits(std::vector<Entry>& entries, const std::vector<ShadingScene>& 
             e.visits = entries[i - 1].visits, e.counted_rays = entries[i - 1].counted_rays;
             continue;
         }
+        show_progress(o.scene, e, "counting visits", i == 0);
         std::tie(e.visits, e.counted_rays) = count_frame(*e.accel, shading[i], camera, 1);
     }
 }
@@ -437,19 +449,23 @@ void render_frames(std::vector<Entry>& entries, const Scene& scene, FlatScene& f
     }
     const PinholeCamera camera(scene_camera(scene, flat), o.width, o.height);
     std::vector<Image> images(entries.size(), Image(o.width, o.height));
-    for (size_t i = 0; i < entries.size(); ++i) render(*entries[i].accel, shading[i], camera, 0, images[i]);  // warm-up
+    for (size_t i = 0; i < entries.size(); ++i) {  // warm-up
+        show_progress(o.scene, entries[i], "warm-up frame", i == 0);
+        render(*entries[i].accel, shading[i], camera, 0, images[i]);
+    }
     for (Image& image : images) image.clear();
     for (Entry& e : entries) e.stream->sort_ns = 0, e.stream->batches = 0, e.stream->path_batches = 0;
     for (int frame = 1; frame <= o.frames; ++frame) {
         if (dynamic) move_all(entries, *dynamic, uint32_t(frame), flat);
         for (size_t i = 0; i < entries.size(); ++i) {
+            show_progress(o.scene, entries[i], step_of("frame", frame, o.frames), frame == 1 && i == 0);
             const auto start = Clock::now();
             entries[i].rays += render(*entries[i].accel, shading[i], camera, uint32_t(frame), images[i]);
             entries[i].frame_ms.push_back(ms_since(start));
         }
     }
     for (size_t i = 0; i < entries.size(); ++i) entries[i].image_mean = images[i].mean(o.frames);
-    if (!dynamic) count_visits(entries, shading, camera);
+    if (!dynamic) count_visits(entries, shading, camera, o);
 }
 
 void write_json(const nlohmann::json& j, const std::string& path) {
@@ -567,8 +583,9 @@ nlohmann::json bench_dynamic(const BenchOptions& o, LoadedScene& loaded, const D
     std::optional<tbb::global_control> limit;
     if (o.threads[0] > 0) limit.emplace(tbb::global_control::max_allowed_parallelism, size_t(o.threads[0]));
     std::vector<Entry> entries = make_entries(loaded.scene, loaded.flat, o, o.threads[0]);
-    build_all(entries, 1);
+    build_all(entries, 1, o.scene);
     render_frames(entries, loaded.scene, loaded.flat, o, &dynamic);
+    progress::finish();
     for (Entry& e : entries) e.report = e.accel->report(false);
     print_dynamic_table(entries, out);
     return dynamic_json(entries, o, dynamic, loaded.flat.triangles.size());
@@ -584,8 +601,9 @@ nlohmann::json bench_static(const BenchOptions& o, LoadedScene& loaded, SceneRep
         if (threads > 0) limit.emplace(tbb::global_control::max_allowed_parallelism, size_t(threads));
         if (o.threads.size() > 1) out.printf("\n%s:", threads_text(threads).c_str());
         std::vector<Entry> entries = make_entries(loaded.scene, loaded.flat, o, threads);
-        build_all(entries, o.builds);
+        build_all(entries, o.builds, o.scene);
         render_frames(entries, loaded.scene, loaded.flat, o, nullptr);
+        progress::finish();  // before the table, on stdout
         for (Entry& e : entries) e.report = e.accel->report(o.epo);
         report_static(entries, tris, o.explain, out);
         for (nlohmann::json& row : results_json(entries, tris)) results.push_back(std::move(row));
@@ -628,6 +646,7 @@ struct BenchCommand {
     std::vector<std::string> scenes, accels, qualities{"medium"};
     std::string dynamic;
     std::vector<int> size{1024, 768};
+    bool quiet = false;
     std::vector<std::string> esc_area_limits, alpha_values;  // the --esc-sa-max and --sbvh-alpha aliases' values
     CLI::Option *dynamic_option = nullptr, *rebraid_option = nullptr, *esc_option = nullptr, *alpha_option = nullptr;
 };
@@ -696,6 +715,7 @@ void add_protocol_options(CLI::App& bench, BenchCommand& c) {
                           "object spanning at most a quarter of the scene); --builds is then 1")
             ->expected(0, 1)->default_str("auto");
     add_memory_limit_option(bench, b.memory_limit);
+    bench.add_flag("--quiet", c.quiet, kQuietHelp);
     bench.add_option("--size", c.size, "Width and height")->expected(2)->check(CLI::Range(1, 16384))->capture_default_str();
 }
 
@@ -750,7 +770,10 @@ void register_bench(CLI::App& canopy) {
         ->required();
     add_row_options(*bench, *c);
     add_protocol_options(*bench, *c);
-    bench->callback([c] { run_bench(c->scenes, parsed_options(*c)); });
+    bench->callback([c] {
+        progress::start(c->quiet);
+        run_bench(c->scenes, parsed_options(*c));
+    });
 }
 
 // Row by row as make_entries makes them. Rows that differ only by traversal mode, intersector or collapse are

@@ -24,6 +24,8 @@ inline constexpr const char* kCollapseHelp =
     "builder lbvh, direct (no binary tree: the wide tree straight from the Morton codes, largest weight first). "
     "Default: direct for lbvh's flat bvh4/bvh8 (its fast build), optimal for every other tree";
 
+inline constexpr const char* kQuietHelp = "No progress line on stderr";
+
 // Adds --memory-limit BYTES (render, bench): the bound on a scene's estimated peak memory, refused at zero or below.
 void add_memory_limit_option(CLI::App& command, std::optional<uint64_t>& bytes);
 

@@ -1,6 +1,7 @@
 #include "experiments/per_scene.h"
 
 #include "renderer/distributed.h"
+#include "renderer/progress.h"
 
 #include <cstdarg>
 #include <cstdio>
@@ -12,6 +13,7 @@ void SceneReport::printf(const char* format, ...) {
     va_list args;
     va_start(args, format);
     if (live_) {
+        progress::clear();  // a terminal's progress line, so the text starts on a line of its own
         std::vprintf(format, args);
     } else {
         va_list size_args;

@@ -335,6 +335,7 @@ void measure_permuted(StudyRow& row, const Accelerator& original, const FlatScen
 StudyScene study_scene(const std::string& scene_name, const Scene& scene, const FlatScene& flat,
                         const std::vector<std::string>& names, const StudyOptions& o, SceneReport& report) {
     const PinholeCamera camera(scene_camera(scene, flat), o.width, o.height);
+    progress::phase("study " + scene_name + ": the reference tree and the diffuse rays");
     auto reference = make_canopy_accelerator(flat, {"binned", "", "auto"});
     reference->prepare();
     reference->build();
@@ -348,9 +349,12 @@ StudyScene study_scene(const std::string& scene_name, const Scene& scene, const 
     if (o.rotate)
         for (const Ray& ray : rays) rotated_rays.push_back(rotation.ray(ray));
     for (const std::string& name : names) {
+        const std::string what = "study " + scene_name + ", " + name + ": ";
+        progress::update(what + "building the scalar and SIMD trees");
         auto scalar = make_canopy_accelerator(flat, study_options(name, "bvh2"));
         auto simd = make_canopy_accelerator(flat, study_options(name, "auto"));
         for (Accelerator* a : {scalar.get(), simd.get()}) a->prepare(), a->build();
+        progress::update(what + "SAH, EPO, LCV and timing the rays");
         const AcceleratorReport rs = scalar->report(true), rw = simd->report(true);
         const double none = std::nan("");  // what another structure family does not define (EPO, wide layouts)
         StudyRow row{name, distributed::host(), rs.sah.value_or(none), rs.epo.value_or(none), ns_per_ray(*scalar, rays, o.repeats),
@@ -359,11 +363,18 @@ StudyScene study_scene(const std::string& scene_name, const Scene& scene, const 
         report.printf("  %-8s scalar: SAH %7.2f EPO %7.2f %7.1f ns/ray | %s: SAH %7.2f EPO %7.2f LCV %6.2f %7.1f ns/ray\n",
                       name.c_str(), row.scalar_sah, row.scalar_epo, row.scalar_ns, simd->kernel().c_str(), row.sah,
                       row.epo, row.lcv, row.simd_ns);
-        if (rotated) measure_rotated(row, *rotated, rotated_rays, o, report);
-        if (o.permute_nodes && is_bvh_builder(spec_name(name))) measure_permuted(row, *simd, flat, rays, o, report);
+        if (rotated) {
+            progress::update(what + "the rotated scene");
+            measure_rotated(row, *rotated, rotated_rays, o, report);
+        }
+        if (o.permute_nodes && is_bvh_builder(spec_name(name))) {
+            progress::update(what + "the permuted nodes");
+            measure_permuted(row, *simd, flat, rays, o, report);
+        }
         report.flush();  // a study takes minutes: show each row as it comes
         result.rows.push_back(row);
     }
+    progress::finish();
     return result;
 }
 
@@ -460,6 +471,11 @@ void run_study(const StudyOptions& o) { measure_study(o); }
 
 void register_study(CLI::App& canopy) {
     auto st = std::make_shared<StudyOptions>();
+    struct Run {  // the command's, not the measurement's (reproduce runs studies too)
+        int threads = 0;
+        bool quiet = false;
+    };
+    auto run = std::make_shared<Run>();
     auto size = std::make_shared<std::vector<int>>(std::vector<int>{st->width, st->height});
     CLI::App* study = canopy.add_subcommand("study", "SAH, EPO and LCV against measured ns/ray for every builder (Aila et al. 2013)");
     study->add_option("scenes", st->scenes, "Scenes: scene.json, .obj, .gltf, .glb or gen:NAME?tris=N&seed=S")->required();
@@ -472,7 +488,9 @@ void register_study(CLI::App& canopy) {
     study->add_flag("--permute-nodes", st->permute_nodes, "Also each SIMD tree with its nodes shuffled in memory (sec. 6)");
     study->add_option("--permute-seed", st->permute_seed, "Seed of --permute-nodes' shuffle")->capture_default_str();
     study->add_option("--plot", st->plot_path, "Write a PNG: predicted (eq. 7) against measured SIMD ns/ray, a panel per scene");
-    study->callback([st, size] {
+    study->add_option("--threads", run->threads, "Threads for every library (0: all)")->check(CLI::Range(0, 4096));
+    study->add_flag("--quiet", run->quiet, kQuietHelp);
+    study->callback([st, size, run] {
         distributed::checked([&] {
             st->builders = join_builder_specs(st->builders);
             for (const std::string& b : st->builders) check_builder_name(b);  // unknown names fail before any work
@@ -481,6 +499,8 @@ void register_study(CLI::App& canopy) {
             if (!st->plot_path.empty()) check_output_path("--plot", st->plot_path, {".png"});
         });
         st->width = (*size)[0], st->height = (*size)[1];
+        const auto limit = limit_threads(run->threads);
+        progress::start(run->quiet);
         run_study(*st);
     });
 }

@@ -80,7 +80,16 @@ std::vector<float> converged_reference(const TradeoffOptions& o, const FlatScene
         accel->prepare();
         accel->build();
     });
-    const SampledImage image = render_samples(*accel, shading, camera, kReferenceFrameBase, o.reference_spp);
+    const std::string what = "tradeoff " + o.scene + ": reference, spp ";
+    const auto done = [&](float fraction) {
+        return what + std::to_string(int(fraction * float(o.reference_spp))) + " of " + std::to_string(o.reference_spp);
+    };
+    const auto on_progress = [&](float fraction) { progress::update(done(fraction)); };
+    if (progress::shown()) progress::phase(done(0.0f));
+    const SampledImage image = render_samples(*accel, shading, camera, kReferenceFrameBase, o.reference_spp,
+                                              progress::shown() ? on_progress : std::function<void(float)>());
+    if (progress::shown()) on_progress(1.0f);  // the tiles' reports may arrive out of order: the last may not be all
+    progress::finish();
     std::vector<float> reference;
     distributed::checked([&] {
         if (!distributed::is_root()) return;
@@ -93,6 +102,9 @@ std::vector<float> converged_reference(const TradeoffOptions& o, const FlatScene
 Curve measure(Accelerator& accel, const TradeoffOptions& o, const ShadingScene& shading, const PinholeCamera& camera,
               const std::vector<float>& reference) {
     Image image(o.width, o.height);
+    const std::string what = "tradeoff " + o.scene + ", " +
+                             (accel.library() == "embree" ? "embree " + accel.quality() : accel.builder()) + ": ";
+    progress::phase(what + "building");
     auto start = Clock::now();
     accel.prepare();
     accel.build();
@@ -106,7 +118,13 @@ Curve measure(Accelerator& accel, const TradeoffOptions& o, const ShadingScene& 
         render(accel, shading, camera, uint32_t(frame), image);
         elapsed += seconds_since(start);
         curve.samples.push_back({frame, elapsed, rms_error(image.average(frame), reference, o.width, o.height)});
+        if (progress::shown()) {
+            char seconds[64];
+            std::snprintf(seconds, sizeof seconds, " frames, %.1f of %g s", elapsed, o.seconds);
+            progress::update(what + std::to_string(frame) + seconds);
+        }
     }
+    progress::finish();  // before the curve's line, on stdout
     return curve;
 }
 
@@ -208,6 +226,7 @@ void register_tradeoff(CLI::App& canopy) {
         std::vector<std::string> accels;
         std::vector<int> size{options.width, options.height};
         int threads = 0;
+        bool quiet = false;
     };
     auto p = std::make_shared<Parsed>();
     TradeoffOptions& tr = p->options;
@@ -227,6 +246,7 @@ void register_tradeoff(CLI::App& canopy) {
     tradeoff->add_flag("--materials", tr.material_albedo, "Use the materials: Kd or baseColorFactor as albedo, Ke or emissiveFactor as light");
     tradeoff->add_option("-o,--output", tr.output, "Output stem: STEM.json, STEM.csv, STEM.png, cached reference beside")->capture_default_str();
     tradeoff->add_option("--threads", p->threads, "Threads for every library (0: all)")->check(CLI::Range(0, 4096));
+    tradeoff->add_flag("--quiet", p->quiet, kQuietHelp);
     tradeoff->callback([p] {
         TradeoffOptions& o = p->options;
         o.width = p->size[0], o.height = p->size[1];
@@ -236,6 +256,7 @@ void register_tradeoff(CLI::App& canopy) {
         // The stem's first file stands for all four: they share its folder.
         distributed::checked([&] { if (distributed::is_root()) check_output_path("-o", o.output + ".json"); });
         const auto limit = limit_threads(p->threads);
+        progress::start(p->quiet);
         run_tradeoff(o);
     });
 }

@@ -2,6 +2,7 @@
 #include "base/output_path.h"
 
 #include "renderer/distributed.h"
+#include "renderer/progress.h"
 
 #include <CLI/CLI.hpp>
 
@@ -120,6 +121,10 @@ std::string markdown_table(const std::vector<std::string>& header, const std::ve
     return table;
 }
 
+void progress_section(const char* paper, const std::string& section) {
+    progress::set_context("reproduce " + std::string(paper) + ", " + section);
+}
+
 std::string format(const char* fmt, double value) {
     if (std::isnan(value)) return "-";
     char text[64];
@@ -145,6 +150,11 @@ void run_reproduce(const ReproduceOptions& options) {
 void register_reproduce(CLI::App& canopy, const std::string& command_line) {
     auto rp = std::make_shared<ReproduceOptions>();
     rp->command = command_line;
+    struct Run {  // the command's, not the papers' (their benches set their own thread counts within this cap)
+        int threads = 0;
+        bool quiet = false;
+    };
+    auto run = std::make_shared<Run>();
     CLI::App* reproduce = canopy.add_subcommand("reproduce", "A paper's tables measured again, written to docs/papers/PAPER.md beside the paper's figures");
     std::string papers;
     for (const std::string& name : reproducible_papers()) papers += name + ", ";
@@ -153,8 +163,13 @@ void register_reproduce(CLI::App& canopy, const std::string& command_line) {
     reproduce->add_option("--out", rp->out_dir, "Folder of PAPER.md and PAPER.json")->capture_default_str();
     reproduce->add_option("--scenes-dir", rp->scenes_dir, "Folder of the shared scenes")->capture_default_str();
     reproduce->add_option("--scenes", rp->scenes, "Your scenes instead of the paper's (no paper figures beside them)")->delimiter(',');
-    reproduce->callback([rp] {
+    reproduce->add_option("--threads", run->threads, "Threads for every library (0: all); caps the papers' own counts")
+        ->check(CLI::Range(0, 4096));
+    reproduce->add_flag("--quiet", run->quiet, kQuietHelp);
+    reproduce->callback([rp, run] {
         distributed::checked([&] { if (distributed::is_root()) check_output_folder("--out", rp->out_dir); });
+        const auto limit = limit_threads(run->threads);
+        progress::start(run->quiet);
         run_reproduce(*rp);
     });
 }

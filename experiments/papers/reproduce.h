@@ -85,6 +85,10 @@ struct PaperDocument {
 // A figure a paper or a run does not have (printed as "-").
 inline constexpr double kNotMeasured = std::numeric_limits<double>::quiet_NaN();
 
+// Names what a paper measures next on the progress line ("reproduce benthin-2017, Table 3: ..."), before the
+// bench or study it runs adds its own scene, row and step.
+void progress_section(const char* paper, const std::string& section);
+
 // A Markdown table: a header row, then rows of cells.
 std::string markdown_table(const std::vector<std::string>& header, const std::vector<std::vector<std::string>>& rows);
 std::string format(const char* fmt, double value);  // "-" for NaN

@@ -286,6 +286,7 @@ std::optional<PaperDocument> reproduce_aila_karras_laine_2013(const ReproduceOpt
     for (const PaperBuilder& b : kBuilders) s.builders.push_back(b.canopy);
     s.rotate = s.permute_nodes = true;
     if (o.quick) s.width = 64, s.height = 48, s.repeats = 1;
+    progress_section("aila-karras-laine-2013", "Tables 1 and 2, rotation and permutation");
     const StudyResult study = measure_study(s);
     if (!distributed::is_root()) return std::nullopt;
     return document(list, study);

@@ -221,7 +221,9 @@ std::string findings(const std::vector<Measured>& ms) {
 std::optional<PaperDocument> reproduce_benthin_2017(const ReproduceOptions& o) {
     std::vector<std::string> scenes;
     for (const Subject<void>& s : subjects<void>(o, kSubjects)) scenes.push_back(s.spec);
+    progress_section("benthin-2017", "Tables 1 and 2, Figure 4");
     const std::vector<BenchScene> statics = measure_bench(scenes, static_options(o.quick));
+    progress_section("benthin-2017", "Table 3");
     const std::vector<BenchScene> dynamic = measure_bench(scenes, dynamic_options(o.quick));
     if (!distributed::is_root()) return std::nullopt;
     std::vector<Measured> ms;

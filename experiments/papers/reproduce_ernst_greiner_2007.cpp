@@ -360,6 +360,7 @@ std::optional<PaperDocument> reproduce_ernst_greiner_2007(const ReproduceOptions
     for (const Setting& setting : kSettings) {
         SettingResult result{&setting, {}};
         for (size_t i = 0; i < list.size(); ++i) {
+            progress_section("ernst-greiner-2007", setting.title + std::string(", ") + list[i].label);
             const std::vector<BenchScene> scene = measure_bench({list[i].spec}, bench_options(setting, area_limit[i], o.quick));
             if (!distributed::is_root()) continue;
             result.scenes.push_back(measured_rows(scene.at(0)));

@@ -180,7 +180,9 @@ std::optional<PaperDocument> reproduce_ganestam_doggett_2016(const ReproduceOpti
     const std::vector<Subject<PaperScene>> list = subjects<PaperScene>(o, kSubjects);
     std::vector<std::string> specs;
     for (const Subject<PaperScene>& s : list) specs.push_back(s.spec);
+    progress_section("ganestam-doggett-2016", "Tables 1, 3, 4 and 5");
     const std::vector<BenchScene> tables = measure_bench(specs, table_options(o.quick));
+    progress_section("ganestam-doggett-2016", "Figure 4");
     const std::vector<BenchScene> scaling = measure_bench({specs.back()}, scaling_options(o.quick));
     if (!distributed::is_root()) return std::nullopt;
     PaperDocument d{"Ganestam and Doggett 2016: SAH guided spatial split partitioning",
