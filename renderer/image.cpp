@@ -51,14 +51,16 @@ void write_image(const std::string& path, int width, int height, const std::vect
     if (!out) throw std::runtime_error(path + ": cannot create image output: " + OIIO::geterror());
     const bool display = lower_extension(path) != ".exr";  // a PNG or JPEG: 8-bit sRGB
     OIIO::ImageSpec spec(width, height, 3, display ? OIIO::TypeDesc::UINT8 : OIIO::TypeDesc::FLOAT);
-    std::vector<float> pixels = rgb;
+    std::vector<float> encoded;  // a display image's code values; an EXR is written from `rgb` as it is
     if (display) {
-        std::transform(pixels.begin(), pixels.end(), pixels.begin(), srgb_encoded);
+        encoded.resize(rgb.size());
+        std::transform(rgb.begin(), rgb.end(), encoded.begin(), srgb_encoded);
         spec.attribute("oiio:ColorSpace", "sRGB");
     } else {
         spec.attribute("compression", "zip");
     }
-    if (!out->open(path, spec) || !out->write_image(OIIO::TypeDesc::FLOAT, pixels.data()) || !out->close())
+    const float* pixels = display ? encoded.data() : rgb.data();
+    if (!out->open(path, spec) || !out->write_image(OIIO::TypeDesc::FLOAT, pixels) || !out->close())
         throw std::runtime_error(path + ": cannot write the image: " + out->geterror());
 }
 

@@ -4,7 +4,7 @@
 // batch's tile order. Both trace the same paths with the same random numbers, so they give the same image and rays;
 // only their speed differs, and which is faster depends on the scene and view: sorted bounces win inside a room,
 // where the rays of a bounce share the nodes they visit, and lose on large scenes seen from outside, where a batch's
-// bounces scatter over more nodes than the caches hold (docs/results.md#stream-batches-by-measurement).
+// bounces scatter over more nodes than the caches hold (docs/results.md#the-stream-tracer-on-every-scene).
 #include <array>
 #include <cstdint>
 #include <mutex>
@@ -65,21 +65,14 @@ public:
         const std::lock_guard lock(mutex_);
         Cost& c = of(way);
         --c.in_flight;
-        ++c.batches;
         if (!counted || rays == 0) return;
         c.ns += double(ns), c.rays += double(rays), ++c.counted;
-    }
-
-    // Batches traced each way so far (including those not counted).
-    uint64_t batches(Way way) const {
-        const std::lock_guard lock(mutex_);
-        return costs_[size_t(way)].batches;
     }
 
 private:
     struct Cost {
         double ns = 0, rays = 0;
-        uint64_t counted = 0, batches = 0;
+        uint64_t counted = 0;
         int in_flight = 0;
         double per_ray() const { return ns / rays; }
     };

@@ -268,7 +268,6 @@ uint64_t render_frame_stream(const BatchTracer& tracer, const SingleTracer& sing
     tbb::parallel_for(uint64_t(0), plan.batches, uint64_t(1), [&](uint64_t b) {
         const StreamChooser::Way way = chooser.next(scene.settings.stream_batching);
         uint64_t traced = 0, sorting = 0;
-        bool counted = true;
         Wavefront* wf = nullptr;
         size_t bytes = 0;
         if (way == StreamChooser::Way::Wavefront) {
@@ -280,7 +279,7 @@ uint64_t render_frame_stream(const BatchTracer& tracer, const SingleTracer& sing
             if (wf) traced = detail::trace_wavefront(tracer, scene, camera, frame, plan, b, *wf, accumulated, sorting);
             else traced = detail::trace_paths(single, scene, camera, frame, plan, b, accumulated);
         });
-        counted = !wf || wf->bytes() == bytes;  // a batch that grew its buffers after all paid for fresh memory
+        const bool counted = !wf || wf->bytes() == bytes;  // a batch that grew its buffers after all paid for fresh memory
         chooser.record(way, ns, traced, counted);
         rays += traced;
         sort_ns += sorting;
