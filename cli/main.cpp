@@ -2,6 +2,7 @@
 #include "cli/render.h"
 #include "experiments/accuracy.h"
 #include "experiments/bench.h"
+#include "experiments/build_commit.h"
 #include "experiments/papers/reproduce.h"
 #include "experiments/study.h"
 #include "experiments/tradeoff.h"
@@ -59,10 +60,10 @@ constexpr const char* kExitCodes =
     "Exit status: 0 done; 1 an input or run error (a scene that cannot be read, a failed write); 2 a usage error (an\n"
     "unknown, malformed or contradicting option, an output path that cannot be written).";
 
-// The project version and the commit the build was configured at, when it was configured in a git checkout.
+// The project version and the commit the binary was built from, when it was built in a git checkout.
 std::string version_text() {
-    const std::string commit = CANOPY_GIT_COMMIT;
-    return std::string("canopy ") + CANOPY_VERSION + (commit.empty() ? "" : " (commit " + commit + ")");
+    const std::string commit = build_commit();
+    return std::string("canopy ") + CANOPY_VERSION + (commit.empty() ? "" : ", commit " + commit);
 }
 
 }  // namespace

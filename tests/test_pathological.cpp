@@ -2,10 +2,9 @@
 // 1e30, parallel needles. Every builder builds each within its reference cap, the memory estimate and the depth
 // contract, and its widest kernel agrees with brute force on a sample of rays.
 #include "accel/memory_budget.h"
+#include "scenes/pathological.h"
 #include "oracle.h"
 #include "test_scale.h"
-
-#include <random>
 
 using namespace canopy;
 using namespace canopy::test;
@@ -15,54 +14,6 @@ namespace {
 // The scenes' triangle count (the tests' comment says why not a million).
 const size_t kTriangles = scaled(50'000, 10000);
 constexpr size_t kSampleRays = 256;
-
-std::vector<Triangle> identical_triangles(size_t n) {
-    return std::vector<Triangle>(n, Triangle{Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0)});
-}
-
-// Small triangles scattered over the square [-1, 1]^2 of the plane z = 0, overlapping at random.
-std::vector<Triangle> triangles_in_one_plane(size_t n) {
-    std::mt19937_64 rng(3);
-    std::uniform_real_distribution<float> in_square(-1.0f, 1.0f), offset(-0.01f, 0.01f);
-    std::vector<Triangle> tris(n);
-    for (Triangle& t : tris) {
-        const Vec3 a(in_square(rng), in_square(rng), 0.0f);
-        t = {a, a + Vec3(offset(rng), offset(rng), 0.0f), a + Vec3(offset(rng), offset(rng), 0.0f)};
-    }
-    return tris;
-}
-
-// Collinear triangles (the third corner on the first edge's line) and points, scattered in [-1, 1]^3.
-std::vector<Triangle> zero_area_triangles(size_t n) {
-    std::mt19937_64 rng(5);
-    std::uniform_real_distribution<float> in_cube(-1.0f, 1.0f), step(-0.05f, 0.05f);
-    std::vector<Triangle> tris(n);
-    for (size_t i = 0; i < n; ++i) {
-        const Vec3 a(in_cube(rng), in_cube(rng), in_cube(rng)), d(step(rng), step(rng), step(rng));
-        tris[i] = i % 4 == 0 ? Triangle{a, a, a} : Triangle{a, a + d, a + 3.0f * d};
-    }
-    return tris;
-}
-
-// Long, thin triangles, all along the diagonal (1, 1, 1): their boxes are cubes that they barely fill, which
-// makes the split builders split them hardest.
-std::vector<Triangle> parallel_needles(size_t n) {
-    std::mt19937_64 rng(7);
-    std::uniform_real_distribution<float> in_cube(-1.0f, 1.0f);
-    const Vec3 along = glm::normalize(Vec3(1, 1, 1)), across = 1e-4f * glm::normalize(Vec3(1, -1, 0));
-    std::vector<Triangle> tris(n);
-    for (Triangle& t : tris) {
-        const Vec3 a(in_cube(rng), in_cube(rng), in_cube(rng));
-        t = {a, a + along, a + across};
-    }
-    return tris;
-}
-
-std::vector<Triangle> scaled_box(size_t n, float scale) {
-    std::vector<Triangle> tris = flatten(load_scene("gen:box?tris=" + std::to_string(n) + "&seed=9")).triangles;
-    for (Triangle& t : tris) t = {t.v0 * scale, t.v1 * scale, t.v2 * scale};
-    return tris;
-}
 
 // The widest kernel this build and CPU run, over one binary tree.
 std::vector<Hit> trace_widest(const Bvh& binary, std::span<const Triangle> tris, const std::vector<Ray>& rays) {
@@ -99,10 +50,9 @@ void check_every_builder(std::span<const Triangle> tris, const std::string& scen
 
 }  // namespace
 
-// 50,000 triangles per scene (10,000 under the sanitizer presets' CANOPY_TEST_SCALE): every scene is built by
-// all 17 builders and checked against brute force, which at a million triangles per scene took 33 s of CPU for
-// the identical triangles alone and minutes for the six scenes, more than the rest of the suite; the million-
-// triangle runs are in docs/results.md (Hardening).
+// 50,000 triangles per scene (10,000 under the sanitizer presets' CANOPY_TEST_SCALE): a million per scene would
+// take longer than the rest of the suite; tools/pathological_builds times every builder at a million
+// (docs/results.md#pathological-scenes-at-a-million-triangles).
 TEST_CASE("a scene of identical triangles", "[pathological]") {
     check_every_builder(identical_triangles(kTriangles), "identical");
 }

@@ -6,6 +6,7 @@
 #include "accel/builders/presplit.h"
 #include "accel/builders/sbvh.h"
 #include "oracle.h"
+#include "scenes/pathological.h"
 #include "renderer/frames.h"
 
 #include <cstring>
@@ -141,7 +142,8 @@ TEST_CASE("early split clipping pieces lie in their triangle, cover it and respe
         // Every piece is within SA_max where the depth limit allows: 10 halvings shrink a box's area at least
         // 64-fold (a third of them on each axis of a diagonal sliver), so triangles up to 64 SA_max get there.
         size_t too_big = 0;
-        for (const PrimRef& r : refs) too_big += r.bounds().area() > sa_max && BBox::of(tris[r.prim]).area() <= 64.0f * sa_max;
+        for (const PrimRef& r : refs)
+            too_big += r.bounds().area() > sa_max && BBox::of(tris[r.prim]).area() <= 64.0f * sa_max && !esc_keeps_whole(tris[r.prim]);
         CHECK(too_big == 0);
     }
     CHECK_THROWS_AS(early_split_clip_refs(tris, make_prim_refs(tris), 0.0f), std::invalid_argument);
@@ -193,6 +195,21 @@ TEST_CASE("automatic SA_max splits scenes of slivers and leaves well-filled boxe
         REQUIRE(esc.nodes.size() == binned.nodes.size());
         CHECK(std::memcmp(esc.nodes.data(), binned.nodes.data(), esc.nodes.size() * sizeof(BvhNode)) == 0);
     }
+}
+
+TEST_CASE("early split clipping leaves lines and points whole and keeps needles within the reference budget",
+          "[builders][split]") {
+    const std::vector<Triangle> lines = zero_area_triangles(20000);
+    for (const Triangle& t : lines) REQUIRE(esc_keeps_whole(t));
+    CHECK(early_split_clip_refs(lines, make_prim_refs(lines), 1e-12f).size() == lines.size());
+    // The smallest SA_max would split every needle into up to 2^10 pieces: a doubling of it that fits the budget
+    // of 4 a triangle is used instead, and the needles are still split.
+    const std::vector<Triangle> needles = parallel_needles(20000);
+    const auto budget = uint64_t(kMaxEscReferencesPerTriangle * double(needles.size()));
+    const size_t pieces = early_split_clip_refs(needles, make_prim_refs(needles), 1e-12f, budget).size();
+    CHECK(pieces <= budget);
+    CHECK(pieces > needles.size());
+    CHECK(early_split_clip_count(needles, make_prim_refs(needles), 1e-12f) > budget);
 }
 
 TEST_CASE("sbvh leaves of a triangle cover it; the reference cap holds", "[builders][split]") {

@@ -6,6 +6,7 @@
 #include "accel/triangle_clipping.h"
 
 #include <algorithm>
+#include <atomic>
 #include <limits>
 #include <numeric>
 #include <cmath>
@@ -19,6 +20,7 @@ namespace {
 constexpr size_t kGrain = 1024;
 // The automatic SA_max's pieces (early_split_clipping.h): at most 8 median ideal areas.
 constexpr double kIdealAreasPerPiece = 8.0;
+constexpr size_t kSampledReferences = 4096;  // where SA_max must grow to fit the budget, a guess from this many
 
 // Alg. 4 with an explicit stack; depth-first, left before right, so the pieces come out in a fixed order.
 template <class Emit>
@@ -62,6 +64,11 @@ double median_of(std::vector<float>& values) {
 
 }  // namespace
 
+bool esc_keeps_whole(const Triangle& t) {
+    const Vec3 e1 = t.v1 - t.v0, e2 = t.v2 - t.v0;
+    return glm::length(glm::cross(e1, e2)) <= kEscLineSine * glm::length(e1) * glm::length(e2);
+}
+
 float automatic_sa_max(std::span<const Triangle> triangles, const std::vector<PrimRef>& refs) {
     const size_t n = refs.size();
     if (n == 0) return std::numeric_limits<float>::infinity();
@@ -76,12 +83,44 @@ float automatic_sa_max(std::span<const Triangle> triangles, const std::vector<Pr
 
 namespace {
 
-// Each reference's pieces at `sa_max`.
-void count_pieces(std::span<const Triangle> triangles, const std::vector<PrimRef>& refs, float sa_max, std::vector<uint32_t>& pieces) {
+// Each reference's pieces at `sa_max`, if they sum to at most `budget` (at least the references): counting stops
+// once the sum passes it, so a far too small SA_max costs about the budget, not the pieces it would make.
+bool count_pieces_within(std::span<const Triangle> triangles, const std::vector<PrimRef>& refs, float sa_max,
+                         uint64_t budget, std::vector<uint32_t>& pieces) {
     pieces.resize(refs.size());
+    const uint64_t extra_budget = budget - std::min<uint64_t>(budget, refs.size());  // pieces beyond one a reference
+    std::atomic<uint64_t> extra{0};
     parallel::for_each(refs.size(), kGrain, [&](size_t i) {
-        pieces[i] = refs[i].bounds().area() <= sa_max ? 1 : clip_until_small(triangles[refs[i].prim], refs[i].bounds(), sa_max, [](const BBox&) {});
+        if (extra.load(std::memory_order_relaxed) > extra_budget) return;
+        const Triangle& t = triangles[refs[i].prim];
+        const BBox box = refs[i].bounds();
+        const bool whole = box.area() <= sa_max || esc_keeps_whole(t);
+        pieces[i] = whole ? 1 : clip_until_small(t, box, sa_max, [](const BBox&) {});
+        if (pieces[i] > 1) extra.fetch_add(pieces[i] - 1, std::memory_order_relaxed);
     });
+    return extra.load() <= extra_budget;
+}
+
+// The first doubling of `sa_max` whose pieces fit `budget` on a sample of the references, scaled. The sample is
+// scattered by a multiplicative hash, not strided, which a scene's periodic order would fool.
+int sampled_doubling(std::span<const Triangle> triangles, const std::vector<PrimRef>& refs, float sa_max, uint64_t budget) {
+    std::vector<PrimRef> sample(std::min(refs.size(), kSampledReferences));
+    for (size_t j = 0; j < sample.size(); ++j) sample[j] = refs[(uint64_t(j) * 0x9E3779B97F4A7C15ull) % refs.size()];
+    const double share = double(sample.size()) / double(refs.size());
+    const auto sample_budget = uint64_t(std::min(double(budget) * share, 1e18));
+    std::vector<uint32_t> ignored;
+    int k = 1;
+    while (!count_pieces_within(triangles, sample, std::ldexp(sa_max, k), sample_budget, ignored)) ++k;
+    return k;
+}
+
+// A doubling of `sa_max` whose pieces fit `budget`, their counts in `pieces`: the sample's guess, raised until
+// every reference fits. A failed count costs about the budget, so the sample keeps them few.
+float fitting_sa_max(std::span<const Triangle> triangles, const std::vector<PrimRef>& refs, float sa_max,
+                     uint64_t budget, std::vector<uint32_t>& pieces) {
+    if (count_pieces_within(triangles, refs, sa_max, budget, pieces)) return sa_max;
+    for (int k = sampled_doubling(triangles, refs, sa_max, budget);; ++k)
+        if (count_pieces_within(triangles, refs, std::ldexp(sa_max, k), budget, pieces)) return std::ldexp(sa_max, k);
 }
 
 void check_sa_max(float sa_max) {
@@ -93,7 +132,7 @@ void check_sa_max(float sa_max) {
 uint64_t early_split_clip_count(std::span<const Triangle> triangles, const std::vector<PrimRef>& refs, float sa_max) {
     check_sa_max(sa_max);
     std::vector<uint32_t> pieces;
-    count_pieces(triangles, refs, sa_max, pieces);
+    count_pieces_within(triangles, refs, sa_max, std::numeric_limits<uint64_t>::max(), pieces);
     return std::accumulate(pieces.begin(), pieces.end(), uint64_t{0});
 }
 
@@ -102,14 +141,9 @@ std::vector<PrimRef> early_split_clip_refs(std::span<const Triangle> triangles, 
     check_sa_max(sa_max);
     const size_t n = refs.size();
     std::vector<uint32_t> pieces;
+    sa_max = fitting_sa_max(triangles, refs, sa_max, std::max<uint64_t>(max_references, n), pieces);
     std::vector<uint64_t> offset(n + 1, 0);
-    // Terminates: once SA_max exceeds every box's area (at the latest when it overflows to infinity), each
-    // triangle is one piece, and n references always fit.
-    for (;; sa_max *= 2.0f) {
-        count_pieces(triangles, refs, sa_max, pieces);
-        for (size_t i = 0; i < n; ++i) offset[i + 1] = offset[i] + pieces[i];
-        if (offset[n] <= std::max<uint64_t>(max_references, n)) break;
-    }
+    for (size_t i = 0; i < n; ++i) offset[i + 1] = offset[i] + pieces[i];
     if (offset[n] == n) return std::move(refs);
     std::vector<PrimRef> out(offset[n]);
     parallel::for_each(n, kGrain, [&](size_t i) {

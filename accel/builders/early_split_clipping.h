@@ -18,6 +18,11 @@ constexpr int kMaxEscDepth = 10;
 std::vector<PrimRef> early_split_clip_refs(std::span<const Triangle> triangles, std::vector<PrimRef>&& refs, float sa_max,
                                            uint64_t max_references = UINT64_MAX);
 constexpr double kMaxEscReferencesPerTriangle = 4.0;
+// Triangles whose edges meet at a sine of at most kEscLineSine stay whole at any SA_max: lines and points, or
+// slivers nearly as thin, which rays seldom or never hit, so that a scene of them does not spend the reference
+// budget where it buys nothing (docs/results.md#pathological-scenes-at-a-million-triangles).
+constexpr float kEscLineSine = 1e-5f;
+bool esc_keeps_whole(const Triangle& t);
 // The references early_split_clip_refs would make at this SA_max, with no cap: without making them.
 uint64_t early_split_clip_count(std::span<const Triangle> triangles, const std::vector<PrimRef>& refs, float sa_max);
 

@@ -1,5 +1,6 @@
 #include "experiments/papers/reproduce.h"
 #include "base/output_path.h"
+#include "experiments/build_commit.h"
 
 #include "renderer/distributed.h"
 #include "renderer/progress.h"
@@ -67,10 +68,8 @@ Provenance provenance(const std::string& command) {
     std::strftime(date, sizeof date, "%Y-%m-%d %H:%M UTC", std::gmtime(&now));
     const std::string machine = cpu_model() + ", " + std::to_string(std::thread::hardware_concurrency()) +
                                 " hardware threads, host " + distributed::host();
-    std::string commit = first_line_of("git rev-parse --short HEAD 2>/dev/null");
-    if (!commit.empty() && !first_line_of("git status --porcelain --untracked-files=no 2>/dev/null").empty())
-        commit += " (with uncommitted changes)";
-    return {command, date, machine, commit.empty() ? "unknown (not run in a git checkout)" : commit};
+    const std::string commit = build_commit();
+    return {command, date, machine, commit.empty() ? "unknown (built outside a git checkout)" : commit};
 }
 
 // The document's first sentences: the command, date, machine and commit.
