@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <optional>
 #include <stdexcept>
 
 namespace canopy {
@@ -72,6 +73,86 @@ private:
     std::string path_;
 };
 
+// Tick marks of a linear axis over [low, high]: a step of 1, 2 or 5 times a power of ten, about five of them.
+struct LinearAxis {
+    double low, high, step;
+};
+
+LinearAxis linear_axis(double low, double high) {
+    if (!(high > low)) low -= 0.5 * (std::abs(low) + 1.0), high += 0.5 * (std::abs(high) + 1.0);
+    const double raw = (high - low) / 5.0, power = std::pow(10.0, std::floor(std::log10(raw)));
+    const double step = raw <= power ? power : raw <= 2 * power ? 2 * power : raw <= 5 * power ? 5 * power : 10 * power;
+    return {std::floor(low / step) * step, std::ceil(high / step) * step, step};
+}
+
+std::string tick_label(double value, double step) {
+    char text[32];
+    const int decimals = std::max(0, -int(std::floor(std::log10(step))));
+    std::snprintf(text, sizeof text, "%.*f", decimals, std::abs(value) < 0.5 * step ? 0.0 : value);
+    return text;
+}
+
+// The least-squares line y = a + b x through the points, if they are not all at one x.
+std::optional<std::pair<double, double>> least_squares(const std::vector<ScatterPoint>& points) {
+    double n = 0, sx = 0, sy = 0, sxx = 0, sxy = 0;
+    for (const ScatterPoint& p : points) n += 1, sx += p.x, sy += p.y, sxx += p.x * p.x, sxy += p.x * p.y;
+    const double d = n * sxx - sx * sx;
+    if (n < 2 || !(std::abs(d) > 0)) return std::nullopt;
+    const double b = (n * sxy - sx * sy) / d;
+    return std::pair{(sy - b * sx) / n, b};
+}
+
+// Draws the line a + b x where it lies inside the axes' box.
+template <class ToX, class ToY>
+void draw_fit(Canvas& canvas, std::pair<double, double> fit, const LinearAxis& ax, const LinearAxis& ay, ToX&& px, ToY&& py) {
+    const auto [a, b] = fit;
+    double from = ax.low, to = ax.high;
+    if (b != 0) {
+        const double at_low = (ay.low - a) / b, at_high = (ay.high - a) / b;
+        from = std::max(from, std::min(at_low, at_high)), to = std::min(to, std::max(at_low, at_high));
+    } else if (a < ay.low || a > ay.high) {
+        return;
+    }
+    const float grey[3] = {0.6f, 0.6f, 0.6f};
+    if (from < to) canvas.line(px(from), py(a + b * from), px(to), py(a + b * to), grey, 2);
+}
+
+void draw_panel(Canvas& canvas, const ScatterPanel& panel, const ScatterPlot& plot, int x0, int panel_width, int height) {
+    constexpr int left = 76, right = 28, top = 68, bottom = 56;
+    using Align = OIIO::ImageBufAlgo::TextAlignX;
+    std::vector<ScatterPoint> points;
+    for (const ScatterPoint& p : panel.points)
+        if (std::isfinite(p.x) && std::isfinite(p.y)) points.push_back(p);
+    double xl = INFINITY, xh = -INFINITY, yl = INFINITY, yh = -INFINITY;
+    for (const ScatterPoint& p : points) xl = std::min(xl, p.x), xh = std::max(xh, p.x), yl = std::min(yl, p.y), yh = std::max(yh, p.y);
+    if (points.empty()) xl = yl = 0, xh = yh = 1;
+    const LinearAxis ax = linear_axis(xl, xh), ay = linear_axis(yl, yh);
+    const double plot_w = panel_width - left - right, plot_h = height - top - bottom;
+    auto px = [&](double x) { return x0 + left + (x - ax.low) / (ax.high - ax.low) * plot_w; };
+    auto py = [&](double y) { return top + plot_h - (y - ay.low) / (ay.high - ay.low) * plot_h; };
+    const float grid[3] = {0.88f, 0.88f, 0.88f};
+    for (double v = ax.low; v <= ax.high + 0.5 * ax.step; v += ax.step) {
+        canvas.line(px(v), top, px(v), top + plot_h, grid);
+        canvas.text(int(px(v)), int(top + plot_h + 18), tick_label(v, ax.step), 12, Canvas::kBlack, Align::Center);
+    }
+    for (double v = ay.low; v <= ay.high + 0.5 * ay.step; v += ay.step) {
+        canvas.line(x0 + left, py(v), x0 + left + plot_w, py(v), grid);
+        canvas.text(x0 + left - 6, int(py(v)) + 4, tick_label(v, ay.step), 12, Canvas::kBlack, Align::Right);
+    }
+    canvas.line(x0 + left, top + plot_h, x0 + left + plot_w, top + plot_h, Canvas::kBlack);
+    canvas.line(x0 + left, top, x0 + left, top + plot_h, Canvas::kBlack);
+    canvas.text(x0 + panel_width / 2, 20, panel.title, 15, Canvas::kBlack, Align::Center);
+    canvas.text(x0 + panel_width / 2, 38, panel.subtitle, 12, Canvas::kBlack, Align::Center);
+    canvas.text(x0 + left + int(plot_w / 2), height - 12, plot.x_label, 13, Canvas::kBlack, Align::Center);
+    canvas.text(x0 + 8, top - 8, plot.y_label, 13);
+    if (const auto fit = least_squares(points)) draw_fit(canvas, *fit, ax, ay, px, py);
+    for (size_t i = 0; i < points.size(); ++i) {
+        const float* colour = kPalette[i % 10];
+        canvas.line(px(points[i].x), py(points[i].y), px(points[i].x), py(points[i].y), colour, 7);
+        canvas.text(int(px(points[i].x)) + 7, int(py(points[i].y)) - 5, points[i].label, 12, colour);
+    }
+}
+
 }  // namespace
 
 void write_plot_png(const LogLogPlot& plot, const std::string& path, int width, int height) {
@@ -111,6 +192,12 @@ void write_plot_png(const LogLogPlot& plot, const std::string& path, int width, 
         canvas.line(width - right + 15, ly - 5, width - right + 40, ly - 5, colour, 3);
         canvas.text(width - right + 48, ly, plot.series[s].label, 13);
     }
+    canvas.write();
+}
+
+void write_scatter_png(const ScatterPlot& plot, const std::string& path, int panel_width, int height) {
+    Canvas canvas(panel_width * int(std::max<size_t>(1, plot.panels.size())), height, path);
+    for (size_t p = 0; p < plot.panels.size(); ++p) draw_panel(canvas, plot.panels[p], plot, int(p) * panel_width, panel_width, height);
     canvas.write();
 }
 

@@ -1,4 +1,6 @@
 #include "experiments/study.h"
+
+#include "experiments/plot.h"
 #include "base/output_path.h"
 
 #include "accel/builder.h"
@@ -10,7 +12,6 @@
 #include "renderer/progress.h"
 
 #include <CLI/CLI.hpp>
-#include <OpenImageIO/imageio.h>
 #include <glm/gtc/matrix_transform.hpp>
 #include <nlohmann/json.hpp>
 
@@ -137,12 +138,30 @@ StudyFit fixed_fit(const std::vector<StudyScene>& results, bool scalar, bool wit
     return best;
 }
 
+// The tables' name columns: as wide as their longest name, so that long scene specs and builder names do not
+// shift the columns after them.
+struct NameWidths {
+    int scene = 34, builder = 10;
+};
+
+int widest(int least, const std::string& name) { return std::max(least, int(name.size())); }
+
+NameWidths name_widths(const std::vector<StudyScene>& results) {
+    NameWidths w;
+    for (const StudyScene& s : results) {
+        w.scene = widest(w.scene, s.scene);
+        for (const StudyRow& r : s.rows) w.builder = widest(w.builder, r.builder);
+    }
+    return w;
+}
+
 void print_tables(const std::vector<StudyScene>& results, const StudyFit& fixed_scalar, const StudyFit& fixed_simd) {
+    const int w = name_widths(results).scene;
     std::printf("\nTable 1: per-scene correlation of predicted cost with measured ns/ray (Pearson, eq. 5)\n");
-    std::printf("%-34s %9s | %7s %14s | %7s %14s %20s\n", "scene", "builders", "scalar", "scalar", "SIMD", "SIMD", "SIMD");
-    std::printf("%-34s %9s | %7s %14s | %7s %14s %20s\n", "", "", "SAH", "SAH+EPO (a)", "SAH", "SAH+EPO (a)", "SAH+EPO+LCV (a,b)");
+    std::printf("%-*s %9s | %7s %14s | %7s %14s %20s\n", w, "scene", "builders", "scalar", "scalar", "SIMD", "SIMD", "SIMD");
+    std::printf("%-*s %9s | %7s %14s | %7s %14s %20s\n", w, "", "", "SAH", "SAH+EPO (a)", "SAH", "SAH+EPO (a)", "SAH+EPO+LCV (a,b)");
     for (const StudyScene& s : results)
-        std::printf("%-34s %9zu | %7s %7s (%.2f) | %7s %7s (%.2f) %11s (%.2f,%.2f)\n", s.scene.c_str(), s.rows.size(),
+        std::printf("%-*s %9zu | %7s %7s (%.2f) | %7s %7s (%.2f) %11s (%.2f,%.2f)\n", w, s.scene.c_str(), s.rows.size(),
                     corr(s.scalar_sah).c_str(), corr(s.scalar_epo.correlation).c_str(), s.scalar_epo.alpha,
                     corr(s.simd_sah).c_str(), corr(s.simd_epo.correlation).c_str(), s.simd_epo.alpha,
                     corr(s.simd_lcv.correlation).c_str(), s.simd_lcv.alpha, s.simd_lcv.beta);
@@ -184,14 +203,16 @@ double composite_change(const StudyRow& r) {
 
 // Sec. 4.4: what rotating scene and rays 45 degrees about (1, 1, 1) costs each builder, measured and predicted.
 void print_rotation_table(const std::vector<StudyScene>& results) {
+    const NameWidths w = name_widths(results);
     std::printf("\nSec. 4.4: scene and rays rotated 45 degrees about (1, 1, 1), change against the unrotated tree\n");
-    std::printf("%-34s %-10s %10s %8s %8s %8s %11s\n", "scene", "builder", "SIMD time", "SAH", "EPO", "LCV", "eq. 6 a=.5");
+    std::printf("%-*s %-*s %10s %8s %8s %8s %11s\n", w.scene, "scene", w.builder, "builder", "SIMD time", "SAH", "EPO", "LCV",
+                "eq. 6 a=.5");
     double time = 0, sah = 0, epo = 0, composite = 0;
     int n = 0;
     for (const StudyScene& s : results)
         for (const StudyRow& r : s.rows) {
             if (std::isnan(r.rotated_ns)) continue;
-            std::printf("%-34s %-10s %s %s %s %s %s\n", s.scene.c_str(), r.builder.c_str(),
+            std::printf("%-*s %-*s %s %s %s %s %s\n", w.scene, s.scene.c_str(), w.builder, r.builder.c_str(),
                         change_text(percent_change(r.rotated_ns, r.simd_ns), 10).c_str(),
                         change_text(percent_change(r.rotated_sah, r.sah), 8).c_str(),
                         change_text(percent_change(r.rotated_epo, r.epo), 8).c_str(),
@@ -201,7 +222,8 @@ void print_rotation_table(const std::vector<StudyScene>& results) {
             epo += percent_change(r.rotated_epo, r.epo), composite += composite_change(r), ++n;
         }
     if (!n) return;
-    std::printf("%-45s %+9.1f%% %+7.1f%% %+7.1f%% %8s %+10.1f%%\n", "average over BVHs", time / n, sah / n, epo / n, "",
+    std::printf("%-*s %+9.1f%% %+7.1f%% %+7.1f%% %8s %+10.1f%%\n", w.scene + 1 + w.builder, "average over BVHs", time / n,
+                sah / n, epo / n, "",
                 composite / n);
     std::printf("paper (22 scenes, GPU SIMD): time +168%% (+90%% SBVH and STreelet, +250%% Agglo), SAH under +10%% for "
                 "SBVH and STreelet and +50%% for the others, EPO +290%%, eq. 6 with a = 0.50 +165%%\n");
@@ -211,53 +233,38 @@ void print_rotation_table(const std::vector<StudyScene>& results) {
 void print_permutation_table(const std::vector<StudyScene>& results) {
     std::printf("\nSec. 6: wide nodes permuted at random in memory, SIMD time against the builder's own node order (timed "
                 "alternately)\n");
-    std::printf("%-34s %-10s %10s %10s %10s\n", "scene", "builder", "ns/ray", "permuted", "change");
+    const NameWidths w = name_widths(results);
+    std::printf("%-*s %-*s %10s %10s %10s\n", w.scene, "scene", w.builder, "builder", "ns/ray", "permuted", "change");
     double sum = 0;
     int n = 0;
     for (const StudyScene& s : results)
         for (const StudyRow& r : s.rows) {
             if (std::isnan(r.permuted_ns)) continue;
-            std::printf("%-34s %-10s %10.1f %10.1f %+9.1f%%\n", s.scene.c_str(), r.builder.c_str(), r.unpermuted_ns,
+            std::printf("%-*s %-*s %10.1f %10.1f %+9.1f%%\n", w.scene, s.scene.c_str(), w.builder, r.builder.c_str(), r.unpermuted_ns,
                         r.permuted_ns, percent_change(r.permuted_ns, r.unpermuted_ns));
             sum += percent_change(r.permuted_ns, r.unpermuted_ns), ++n;
         }
     if (!n) return;
-    std::printf("%-45s %21s %+9.1f%%\n", "average", "", sum / n);
+    std::printf("%-*s %21s %+9.1f%%\n", w.scene + 1 + w.builder, "average", "", sum / n);
     std::printf("paper (GPU): under 1%% change\n");
 }
 
-// One panel per scene: predicted SIMD cost (eq. 7 with the scene's fit) against measured SIMD ns/ray,
-// both scaled to the panel, one white square per builder, on a grey diagonal.
+// One panel per scene: each builder's predicted SIMD cost (eq. 7 with the scene's fitted a and b) against its
+// measured SIMD ns/ray, with the least-squares line; the nearer the points lie to it, the better the metric.
 void write_plot(const std::vector<StudyScene>& results, const std::string& path) {
-    constexpr int kPanel = 240, kMargin = 20;
-    const int width = kPanel * int(results.size()), height = kPanel;
-    std::vector<uint8_t> rgb(size_t(width) * size_t(height) * 3, 24);
-    auto put = [&](int x, int y, uint8_t v) {
-        if (x >= 0 && x < width && y >= 0 && y < height)
-            for (int k = 0; k < 3; ++k) rgb[(size_t(y) * size_t(width) + size_t(x)) * 3 + size_t(k)] = v;
-    };
-    for (size_t s = 0; s < results.size(); ++s) {
-        const int x0 = int(s) * kPanel;
-        const std::vector<StudyRow> rows = bvh_rows(results[s].rows);
-        const std::vector<double> p = predicted(rows, false, results[s].simd_lcv.alpha, results[s].simd_lcv.beta);
+    ScatterPlot plot{"predicted cost (eq. 7)", "measured SIMD ns/ray", {}};
+    for (const StudyScene& s : results) {
+        const std::vector<StudyRow> rows = bvh_rows(s.rows);
+        const std::vector<double> p = predicted(rows, false, s.simd_lcv.alpha, s.simd_lcv.beta);
         const std::vector<double> m = measured(rows, false);
-        const auto [pmin, pmax] = std::minmax_element(p.begin(), p.end());
-        const auto [mmin, mmax] = std::minmax_element(m.begin(), m.end());
-        const int span = kPanel - 2 * kMargin;
-        for (int i = 0; i <= span; ++i) put(x0 + kMargin + i, kPanel - kMargin - i, 90);  // the diagonal
-        for (int i = 0; i <= span; ++i) put(x0 + kMargin + i, kPanel - kMargin, 160), put(x0 + kMargin, kMargin + i, 160);
-        for (size_t i = 0; i < p.size(); ++i) {
-            const double px = *pmax > *pmin ? (p[i] - *pmin) / (*pmax - *pmin) : 0.5;
-            const double my = *mmax > *mmin ? (m[i] - *mmin) / (*mmax - *mmin) : 0.5;
-            const int cx = x0 + kMargin + int(px * span), cy = kPanel - kMargin - int(my * span);
-            for (int dy = -3; dy <= 3; ++dy)
-                for (int dx = -3; dx <= 3; ++dx) put(cx + dx, cy + dy, 255);
-        }
+        char fit[96];
+        std::snprintf(fit, sizeof fit, "Pearson r = %s at a = %.2f, b = %.2f", corr(s.simd_lcv.correlation).c_str(),
+                      s.simd_lcv.alpha, s.simd_lcv.beta);
+        ScatterPanel panel{s.scene, fit, {}};
+        for (size_t i = 0; i < rows.size(); ++i) panel.points.push_back({p[i], m[i], rows[i].builder});
+        plot.panels.push_back(std::move(panel));
     }
-    auto out = OIIO::ImageOutput::create(path);
-    OIIO::ImageSpec spec(width, height, 3, OIIO::TypeDesc::UINT8);
-    if (!out || !out->open(path, spec) || !out->write_image(OIIO::TypeDesc::UINT8, rgb.data()) || !out->close())
-        throw std::runtime_error(path + ": cannot write the plot");
+    write_scatter_png(plot, path);
 }
 
 }  // namespace
@@ -307,28 +314,28 @@ StudyRow row_from_json(const nlohmann::json& j) {
 
 // Sec. 4.4: the row's builder on the rotated scene, its SIMD tree timed with the rotated rays.
 void measure_rotated(StudyRow& row, const FlatScene& rotated, const std::vector<Ray>& rays, const StudyOptions& o,
-                     SceneReport& report) {
+                     int name_width, SceneReport& report) {
     auto simd = make_canopy_accelerator(rotated, study_options(row.builder, "auto"));
     simd->prepare(), simd->build();
     const AcceleratorReport r = simd->report(true);
     row.rotated_sah = r.sah.value_or(std::nan("")), row.rotated_epo = r.epo.value_or(std::nan(""));
     row.rotated_lcv = leaf_count_variability(*simd, rays);
     row.rotated_ns = ns_per_ray(*simd, rays, o.repeats);
-    report.printf("  %-8s rotated 45 degrees about (1, 1, 1): SAH %7.2f EPO %7.2f LCV %6.2f %7.1f ns/ray\n",
-                  row.builder.c_str(), row.rotated_sah, row.rotated_epo, row.rotated_lcv, row.rotated_ns);
+    report.printf("  %-*s rotated 45 degrees about (1, 1, 1): SAH %7.2f EPO %7.2f LCV %6.2f %7.1f ns/ray\n",
+                  name_width, row.builder.c_str(), row.rotated_sah, row.rotated_epo, row.rotated_lcv, row.rotated_ns);
 }
 
 // Sec. 6: the row's SIMD tree again, its nodes shuffled in memory, timed with the same rays alternately with
 // `original`.
 void measure_permuted(StudyRow& row, const Accelerator& original, const FlatScene& flat, const std::vector<Ray>& rays,
-                      const StudyOptions& o, SceneReport& report) {
+                      const StudyOptions& o, int name_width, SceneReport& report) {
     CanopyOptions options = study_options(row.builder, "auto");
     options.permute_nodes = o.permute_seed;
     auto permuted = make_canopy_accelerator(flat, options);
     permuted->prepare(), permuted->build();
     std::tie(row.unpermuted_ns, row.permuted_ns) = alternating_ns_per_ray(original, *permuted, rays, o.repeats);
-    report.printf("  %-8s nodes permuted in memory (seed %llu): %7.1f ns/ray against %.1f in the builder's order\n",
-                  row.builder.c_str(), (unsigned long long)o.permute_seed, row.permuted_ns, row.unpermuted_ns);
+    report.printf("  %-*s nodes permuted in memory (seed %llu): %7.1f ns/ray against %.1f in the builder's order\n",
+                  name_width, row.builder.c_str(), (unsigned long long)o.permute_seed, row.permuted_ns, row.unpermuted_ns);
 }
 
 // One scene's rows, every builder's trees built and timed in this process.
@@ -348,6 +355,8 @@ StudyScene study_scene(const std::string& scene_name, const Scene& scene, const 
     std::vector<Ray> rotated_rays;
     if (o.rotate)
         for (const Ray& ray : rays) rotated_rays.push_back(rotation.ray(ray));
+    int name_width = 8;
+    for (const std::string& name : names) name_width = widest(name_width, name);
     for (const std::string& name : names) {
         const std::string what = "study " + scene_name + ", " + name + ": ";
         progress::update(what + "building the scalar and SIMD trees");
@@ -360,16 +369,16 @@ StudyScene study_scene(const std::string& scene_name, const Scene& scene, const 
         StudyRow row{name, distributed::host(), rs.sah.value_or(none), rs.epo.value_or(none), ns_per_ray(*scalar, rays, o.repeats),
                      rw.sah.value_or(none), rw.epo.value_or(none), leaf_count_variability(*simd, rays), ns_per_ray(*simd, rays, o.repeats),
                      rw.layout_sah.value_or(none), rw.layout_epo.value_or(none)};
-        report.printf("  %-8s scalar: SAH %7.2f EPO %7.2f %7.1f ns/ray | %s: SAH %7.2f EPO %7.2f LCV %6.2f %7.1f ns/ray\n",
-                      name.c_str(), row.scalar_sah, row.scalar_epo, row.scalar_ns, simd->kernel().c_str(), row.sah,
+        report.printf("  %-*s scalar: SAH %7.2f EPO %7.2f %7.1f ns/ray | %s: SAH %7.2f EPO %7.2f LCV %6.2f %7.1f ns/ray\n",
+                      name_width, name.c_str(), row.scalar_sah, row.scalar_epo, row.scalar_ns, simd->kernel().c_str(), row.sah,
                       row.epo, row.lcv, row.simd_ns);
         if (rotated) {
             progress::update(what + "the rotated scene");
-            measure_rotated(row, *rotated, rotated_rays, o, report);
+            measure_rotated(row, *rotated, rotated_rays, o, name_width, report);
         }
         if (o.permute_nodes && is_bvh_builder(spec_name(name))) {
             progress::update(what + "the permuted nodes");
-            measure_permuted(row, *simd, flat, rays, o, report);
+            measure_permuted(row, *simd, flat, rays, o, name_width, report);
         }
         report.flush();  // a study takes minutes: show each row as it comes
         result.rows.push_back(row);
