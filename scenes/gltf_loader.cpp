@@ -41,8 +41,7 @@ std::string one_line(const std::string& messages) {
 }
 
 tinygltf::Model parse_gltf(const std::string& path) {
-    std::error_code error;
-    if (!fs::is_regular_file(path, error)) throw InputError(path + ": no such file");
+    require_regular_file(path);
     tinygltf::TinyGLTF parser;
     parser.SetImageLoader(skip_image, nullptr);
     tinygltf::Model model;

@@ -116,6 +116,17 @@ bool is_gltf(const std::string& path) {
     return extension == ".gltf" || extension == ".glb";
 }
 
+void require_regular_file(const std::string& path) {
+    namespace fs = std::filesystem;
+    std::error_code error;
+    const fs::file_type type = fs::status(path, error).type();
+    if (type == fs::file_type::regular) return;
+    if (type == fs::file_type::not_found) throw InputError(path + ": no such file");
+    if (type == fs::file_type::directory) throw InputError(path + ": is a folder, not a file");
+    if (error) throw InputError(path + ": cannot be examined (" + error.message() + ")");
+    throw InputError(path + ": is not a regular file (a FIFO, socket or device)");
+}
+
 Mesh baked_mesh(const Scene& scene) {
     Mesh baked;
     baked.name = scene.name;

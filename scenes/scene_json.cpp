@@ -68,8 +68,7 @@ public:
     }
 
     json parse() const {
-        std::error_code error;
-        if (!fs::is_regular_file(path_, error)) throw InputError(path_ + ": no such file");
+        require_regular_file(path_);
         std::ifstream in(path_);
         if (!in) throw InputError(path_ + ": cannot be read");
         FieldTracker tracker;
@@ -177,10 +176,8 @@ std::map<std::string, uint32_t> load_meshes(const SceneFile& file, const json& m
         const std::string relative = file.text(file.required(meshes[i], field, "file"), field + ".file");
         if (index_of.count(name)) file.fail(field + ".name", "'" + name + "' names two meshes");
         const std::string mesh_path = (directory / relative).string();
-        std::error_code error;
-        if (!fs::is_regular_file(mesh_path, error)) file.fail(field + ".file", "mesh file " + mesh_path + " does not exist");
         Scene part;
-        try {
+        try {  // the loader names mesh_path if it is absent or not a file
             part = is_gltf(mesh_path) ? load_gltf(mesh_path) : load_obj(mesh_path);
         } catch (const InputError& e) {
             file.fail(field + ".file", e.what());
