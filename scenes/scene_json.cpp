@@ -175,6 +175,9 @@ std::map<std::string, uint32_t> load_meshes(const SceneFile& file, const json& m
         const std::string name = file.text(file.required(meshes[i], field, "name"), field + ".name");
         const std::string relative = file.text(file.required(meshes[i], field, "file"), field + ".file");
         if (index_of.count(name)) file.fail(field + ".name", "'" + name + "' names two meshes");
+        // Dispatched by extension: anything but .gltf and .glb would otherwise be read as OBJ.
+        if (lowercase_extension(relative) != ".obj" && !is_gltf(relative))
+            file.fail(field + ".file", "'" + relative + "' is not a mesh file: expected .obj, .gltf or .glb");
         const std::string mesh_path = (directory / relative).string();
         Scene part;
         try {  // the loader names mesh_path if it is absent or not a file
