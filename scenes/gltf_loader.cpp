@@ -5,6 +5,7 @@
 // places it, one Instance, so that two-level top levels instance what the file instances.
 #include "scenes/loaders.h"
 
+#include <nlohmann/json.hpp>
 #include <tiny_gltf.h>
 
 #include <glm/gtc/matrix_transform.hpp>
@@ -15,6 +16,7 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <iostream>
 #include <limits>
 #include <numbers>
@@ -25,6 +27,7 @@ namespace canopy {
 namespace {
 
 namespace fs = std::filesystem;
+using nlohmann::json;
 
 // canopy uses no textures: images are neither decoded nor required to be present.
 bool skip_image(tinygltf::Image*, const int, std::string*, std::string*, int, int, const unsigned char*, int, void*) {
@@ -40,22 +43,47 @@ std::string one_line(const std::string& messages) {
     return joined;
 }
 
+std::string indexed(const char* list, size_t index) {
+    return std::string(list) + "[" + std::to_string(index) + "]";
+}
+
+// Read only once tinygltf has failed on a .gltf: its "File not found" names neither the field nor the folder.
+void check_external_buffers(const std::string& path) {
+    std::ifstream in(path);
+    const json root = json::parse(in, nullptr, /*allow_exceptions=*/false);
+    const auto buffers = root.find("buffers");
+    if (buffers == root.end() || !buffers->is_array()) return;
+    for (size_t i = 0; i < buffers->size(); ++i) {
+        const auto uri = (*buffers)[i].find("uri");
+        if (uri == (*buffers)[i].end() || !uri->is_string()) continue;
+        const std::string& name = uri->get_ref<const std::string&>();
+        if (name.empty() || name.starts_with("data:")) continue;
+        std::error_code error;
+        const fs::path file = fs::absolute(fs::path(path).parent_path() / name, error);
+        if (!fs::exists(file, error))
+            throw InputError(path + ": " + indexed("buffers", i) + ".uri: '" + name + "' does not exist (looked for " +
+                             file.string() + ")");
+    }
+}
+
 tinygltf::Model parse_gltf(const std::string& path) {
-    std::error_code error;
-    if (!fs::is_regular_file(path, error)) throw InputError(path + ": no such file");
+    require_regular_file(path);
     tinygltf::TinyGLTF parser;
     parser.SetImageLoader(skip_image, nullptr);
     tinygltf::Model model;
     std::string errors, warnings;
     bool parsed = false;
+    const bool binary = lowercase_extension(path) == ".glb";
     try {
-        parsed = lowercase_extension(path) == ".glb" ? parser.LoadBinaryFromFile(&model, &errors, &warnings, path)
-                                                     : parser.LoadASCIIFromFile(&model, &errors, &warnings, path);
+        parsed = binary ? parser.LoadBinaryFromFile(&model, &errors, &warnings, path)
+                        : parser.LoadASCIIFromFile(&model, &errors, &warnings, path);
     } catch (const std::exception& e) {  // nlohmann's, from inside tinygltf, on some malformed values
         errors = e.what();
     }
-    if (!parsed || !errors.empty())
+    if (!parsed || !errors.empty()) {
+        if (!binary) check_external_buffers(path);
         throw InputError(path + ": " + (errors.empty() ? std::string("tinygltf cannot read it") : one_line(errors)));
+    }
     if (!warnings.empty()) std::cerr << "canopy: warning: " << path << ": " << one_line(warnings) << "\n";
     return model;
 }
@@ -83,10 +111,6 @@ private:
     std::string path_;
     tinygltf::Model model_;
 };
-
-std::string indexed(const char* list, size_t index) {
-    return std::string(list) + "[" + std::to_string(index) + "]";
-}
 
 // The bytes of an accessor's elements, all checked to lie inside its buffer view and buffer.
 struct ElementBytes {

@@ -16,6 +16,8 @@ Scene default_scene();                           // small, embedded, no files ne
 
 std::string lowercase_extension(const std::string& path);  // ".obj" for "a/B.OBJ"
 bool is_gltf(const std::string& path);                     // by its extension, .gltf or .glb
+// Throws InputError naming `path` and what it is when it is not a regular file: absent, a folder, a FIFO, ...
+void require_regular_file(const std::string& path);
 
 // Every instance's objects transformed into one mesh: how a scene.json places a whole glTF file, node
 // hierarchy and all, as one of its meshes. Its meshes have per-triangle materials all or none, as loaders make them.

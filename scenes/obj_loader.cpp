@@ -22,9 +22,9 @@ namespace {
 namespace fs = std::filesystem;
 
 std::string read_text_file(const std::string& path) {
-    std::error_code error;
-    if (!fs::is_regular_file(path, error)) throw InputError(path + ": no such file");
+    require_regular_file(path);
     std::ifstream in(path, std::ios::binary);
+    std::error_code error;
     std::string text(fs::file_size(path, error), '\0');
     if (!in || error || !in.read(text.data(), std::streamsize(text.size())))
         throw InputError(path + ": cannot be read");

@@ -12,6 +12,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <iostream>
 
 namespace canopy {
 namespace {
@@ -102,6 +103,23 @@ void check_representable(const std::string& name, const BBox& bounds) {
                          "and hits nothing; scale the scene up");
 }
 
+// In world space, placed as flatten() places it: where rays meet it.
+bool has_area(const Mesh& mesh, const glm::uvec3& t, const glm::mat4& transform) {
+    const auto place = [&](uint32_t v) { return Vec3(transform * glm::vec4(mesh.positions[v], 1.0f)); };
+    return geometric_normal({place(t.x), place(t.y), place(t.z)}) != Vec3(0.0f);
+}
+
+// Not an error, since the file is valid, but the render would be empty sky without a word why.
+void warn_if_all_zero_area(const std::string& shown_name, const Scene& scene) {
+    for (const Instance& instance : scene.instances) {
+        const Mesh& mesh = scene.meshes[instance.mesh];
+        for (const glm::uvec3& t : mesh.triangles)
+            if (has_area(mesh, t, instance.transform)) return;
+    }
+    std::cerr << "canopy: warning: '" << shown_name << "': all " << instanced_triangle_count(scene)
+              << " triangles have zero area; no ray can hit them\n";
+}
+
 }  // namespace
 
 std::string lowercase_extension(const std::string& path) {
@@ -114,6 +132,17 @@ std::string lowercase_extension(const std::string& path) {
 bool is_gltf(const std::string& path) {
     const std::string extension = lowercase_extension(path);
     return extension == ".gltf" || extension == ".glb";
+}
+
+void require_regular_file(const std::string& path) {
+    namespace fs = std::filesystem;
+    std::error_code error;
+    const fs::file_type type = fs::status(path, error).type();
+    if (type == fs::file_type::regular) return;
+    if (type == fs::file_type::not_found) throw InputError(path + ": no such file");
+    if (type == fs::file_type::directory) throw InputError(path + ": is a folder, not a file");
+    if (error) throw InputError(path + ": cannot be examined (" + error.message() + ")");
+    throw InputError(path + ": is not a regular file (a FIFO, socket or device)");
 }
 
 Mesh baked_mesh(const Scene& scene) {
@@ -140,8 +169,9 @@ Scene load_scene(const std::string& name, const SceneSizeCheck& fits) {
     if (name.starts_with("gen:")) fits(generated_scene_size(name));
     Scene scene = load_by_kind(name);
     if (!name.starts_with("gen:")) fits(scene_size(scene));
-    if (instanced_triangle_count(scene) == 0)
-        throw InputError("'" + (name.empty() ? std::string("default scene") : name) + "': the scene has no triangles");
+    const std::string shown_name = name.empty() ? "default scene" : name;
+    if (instanced_triangle_count(scene) == 0) throw InputError("'" + shown_name + "': the scene has no triangles");
+    warn_if_all_zero_area(shown_name, scene);
     return scene;
 }
 

@@ -68,8 +68,7 @@ public:
     }
 
     json parse() const {
-        std::error_code error;
-        if (!fs::is_regular_file(path_, error)) throw InputError(path_ + ": no such file");
+        require_regular_file(path_);
         std::ifstream in(path_);
         if (!in) throw InputError(path_ + ": cannot be read");
         FieldTracker tracker;
@@ -176,11 +175,12 @@ std::map<std::string, uint32_t> load_meshes(const SceneFile& file, const json& m
         const std::string name = file.text(file.required(meshes[i], field, "name"), field + ".name");
         const std::string relative = file.text(file.required(meshes[i], field, "file"), field + ".file");
         if (index_of.count(name)) file.fail(field + ".name", "'" + name + "' names two meshes");
+        // Dispatched by extension: anything but .gltf and .glb would otherwise be read as OBJ.
+        if (lowercase_extension(relative) != ".obj" && !is_gltf(relative))
+            file.fail(field + ".file", "'" + relative + "' is not a mesh file: expected .obj, .gltf or .glb");
         const std::string mesh_path = (directory / relative).string();
-        std::error_code error;
-        if (!fs::is_regular_file(mesh_path, error)) file.fail(field + ".file", "mesh file " + mesh_path + " does not exist");
         Scene part;
-        try {
+        try {  // the loader names mesh_path if it is absent or not a file
             part = is_gltf(mesh_path) ? load_gltf(mesh_path) : load_obj(mesh_path);
         } catch (const InputError& e) {
             file.fail(field + ".file", e.what());

@@ -121,6 +121,10 @@ TEST_CASE("load_scene_json names the file and the field of every bad entry", "[s
         {"an eye beyond float range", with_camera(R"({"eye": [0, 1e300, 0], "target": [0, 0, 0]})"),
          {"camera.eye[1]", "float range"}},
         {"a missing mesh file", R"({"meshes": [{"name": "a", "file": "absent.obj"}]})", {"meshes[0].file", "absent.obj"}},
+        {"a scene.json as a mesh", R"({"meshes": [{"name": "a", "file": "tri.obj"}, {"name": "b", "file": "scene.json"}]})",
+         {"meshes[1].file: 'scene.json' is not a mesh file: expected .obj, .gltf or .glb"}},
+        {"a mesh file without extension", R"({"meshes": [{"name": "a", "file": "tri"}]})",
+         {"meshes[0].file: 'tri' is not a mesh file"}},
     };
     for (const Case& c : cases) {
         INFO(c.what);

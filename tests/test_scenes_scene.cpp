@@ -1,6 +1,8 @@
 // load_scene dispatch, flatten and auto_camera.
 #include "scenes_test_support.h"
 
+#include <sys/stat.h>
+
 #include <cmath>
 
 using namespace canopy;
@@ -41,6 +43,47 @@ TEST_CASE("load_scene dispatches on the name and rejects what it cannot load", "
     CHECK_THAT(input_error_of([] { load_scene("no-extension"); }), Contains("no-extension"));
     CHECK_THAT(input_error_of([&] { load_scene(dir.file("absent.obj")); }), Contains("absent.obj"));
     CHECK_THAT(input_error_of([&] { load_scene(dir.file("absent.json")); }), Contains("absent.json"));
+}
+
+TEST_CASE("a folder or a FIFO given as a scene or a mesh is named as what it is", "[scenes][dispatch][errors]") {
+    TempDir dir;
+    std::filesystem::create_directory(dir.file("folder.obj"));
+    std::filesystem::create_directory(dir.file("folder.json"));
+    REQUIRE(mkfifo(dir.file("fifo.gltf").c_str(), 0600) == 0);
+    REQUIRE(mkfifo(dir.file("fifo.obj").c_str(), 0600) == 0);
+    CHECK_THAT(input_error_of([&] { load_scene(dir.file("folder.obj")); }),
+               Contains("folder.obj: is a folder, not a file"));
+    CHECK_THAT(input_error_of([&] { load_scene(dir.file("folder.json")); }),
+               Contains("folder.json: is a folder, not a file"));
+    CHECK_THAT(input_error_of([&] { load_scene(dir.file("fifo.gltf")); }),
+               Contains("fifo.gltf: is not a regular file (a FIFO, socket or device)"));
+    CHECK_THAT(input_error_of([&] { load_scene(dir.file("absent.gltf")); }), Contains("absent.gltf: no such file"));
+    const std::string json = dir.write("scene.json", R"({"meshes": [{"name": "f", "file": "fifo.obj"}]})");
+    CHECK_THAT(input_error_of([&] { load_scene(json); }),
+               Contains("scene.json: meshes[0].file: ") && Contains("fifo.obj: is not a regular file"));
+}
+
+TEST_CASE("load_scene warns, once, when every triangle has zero area", "[scenes][dispatch]") {
+    TempDir dir;
+    const std::string line = "v 0 0 0\nv 1 0 0\nv 2 0 0\n";
+    const std::string flat = dir.write("flat.obj", line + "f 1 2 3\nf 1 1 2\n");  // collinear, coincident
+    const std::string json = dir.write("twice.json", R"({"meshes": [{"name": "f", "file": "flat.obj"}],
+        "instances": [{"mesh": "f"}, {"mesh": "f", "transform": [1,0,0,0, 0,1,0,5, 0,0,1,0, 0,0,0,1]}]})");
+    const std::string mixed = dir.write("mixed.obj", line + "v 0 1 0\nf 1 2 3\nf 1 2 4\n");
+    {
+        test::CaptureStderr stderr_capture;
+        CHECK(instanced_triangle_count(load_scene(flat)) == 2);
+        CHECK(stderr_capture.text() ==
+              "canopy: warning: '" + flat + "': all 2 triangles have zero area; no ray can hit them\n");
+    }
+    {
+        test::CaptureStderr stderr_capture;
+        load_scene(json);
+        CHECK_THAT(stderr_capture.text(), Contains("twice.json': all 4 triangles have zero area"));
+    }
+    test::CaptureStderr stderr_capture;
+    load_scene(mixed);
+    CHECK(stderr_capture.text().empty());
 }
 
 TEST_CASE("flatten transforms every instance's triangles, in instance order", "[scenes][flatten]") {
