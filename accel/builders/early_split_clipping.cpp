@@ -101,15 +101,15 @@ bool count_pieces_within(std::span<const Triangle> triangles, const std::vector<
     return extra.load() <= extra_budget;
 }
 
-// The first doubling of `sa_max` whose pieces fit `budget` on a sample of the references, scaled. The sample is
-// scattered by a multiplicative hash, not strided, which a scene's periodic order would fool.
+// The first doubling of `sa_max` (2^0 included) whose pieces fit `budget` on a sample of the references, scaled.
+// The sample is scattered by a multiplicative hash, not strided, which a scene's periodic order would fool.
 int sampled_doubling(std::span<const Triangle> triangles, const std::vector<PrimRef>& refs, float sa_max, uint64_t budget) {
     std::vector<PrimRef> sample(std::min(refs.size(), kSampledReferences));
     for (size_t j = 0; j < sample.size(); ++j) sample[j] = refs[(uint64_t(j) * 0x9E3779B97F4A7C15ull) % refs.size()];
     const double share = double(sample.size()) / double(refs.size());
     const auto sample_budget = uint64_t(std::min(double(budget) * share, 1e18));
     std::vector<uint32_t> ignored;
-    int k = 1;
+    int k = 0;
     while (!count_pieces_within(triangles, sample, std::ldexp(sa_max, k), sample_budget, ignored)) ++k;
     return k;
 }
@@ -118,8 +118,7 @@ int sampled_doubling(std::span<const Triangle> triangles, const std::vector<Prim
 // every reference fits. A failed count costs about the budget, so the sample keeps them few.
 float fitting_sa_max(std::span<const Triangle> triangles, const std::vector<PrimRef>& refs, float sa_max,
                      uint64_t budget, std::vector<uint32_t>& pieces) {
-    if (count_pieces_within(triangles, refs, sa_max, budget, pieces)) return sa_max;
-    for (int k = sampled_doubling(triangles, refs, sa_max, budget);; ++k)
+    for (int k = refs.size() > kSampledReferences ? sampled_doubling(triangles, refs, sa_max, budget) : 0;; ++k)
         if (count_pieces_within(triangles, refs, std::ldexp(sa_max, k), budget, pieces)) return std::ldexp(sa_max, k);
 }
 

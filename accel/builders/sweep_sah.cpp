@@ -73,9 +73,11 @@ public:
     static bool leaf_without_search(const Node&) { return false; }
 
     // Right-to-left areas first, then left to right. No finite cost (box areas that overflow float, scenes
-    // beyond about 1e19) finds no split.
+    // beyond about 1e19) finds no split; nor does a box of no area (a line, a point, or a scene near 1e-20 whose
+    // areas underflow), where every cost is 0 and the first split, one reference against the rest, would win.
     Split find(const Node& node) {
         Split best;
+        if (!(node.bounds.half_area() > 0.0f)) return best;
         for (int axis = 0; axis < 3; ++axis) {
             const std::vector<uint32_t>& order = order_[axis];
             SweepBox right;
