@@ -31,9 +31,12 @@ py::array as_array(const py::object& object, const std::string& name) {
     return a;
 }
 
+enum class Rows { AtLeastOne, AnyNumber };
+
 // `object` as a C-order float32 array of shape (n, 3), or (n, 3, 4) for ndim 3: in place when it is one, else a
-// converted copy.
-py::array_t<float, py::array::c_style> float_array(const py::object& object, const std::string& name, py::ssize_t ndim = 2) {
+// converted copy. A ray batch may be empty (it then does nothing, as in the C++ API); a mesh may not.
+py::array_t<float, py::array::c_style> float_array(const py::object& object, const std::string& name, py::ssize_t ndim = 2,
+                                                   Rows rows = Rows::AtLeastOne) {
     const py::array a = as_array(object, name);
     const std::string expected = ndim == 2 ? "(n, 3)" : "(n, 3, 4)";
     const bool shaped = a.ndim() == ndim && a.shape(1) == 3 && (ndim == 2 || a.shape(2) == 4);
@@ -41,7 +44,7 @@ py::array_t<float, py::array::c_style> float_array(const py::object& object, con
     const char kind = a.dtype().kind();
     if (kind != 'f' && kind != 'i' && kind != 'u')
         throw py::value_error(name + ": dtype " + std::string(py::str(a.dtype())) + ", expected float32 (or real numbers, converted)");
-    if (a.shape(0) == 0) throw py::value_error(name + ": empty");
+    if (a.shape(0) == 0 && rows == Rows::AtLeastOne) throw py::value_error(name + ": empty");
     return py::array_t<float, py::array::c_style | py::array::forcecast>::ensure(a);
 }
 
@@ -99,7 +102,7 @@ struct Rays {
     py::ssize_t count = 0;
 
     Rays(const py::object& o, const py::object& d, const py::object& t0, const py::object& t1)
-        : origins(float_array(o, "origins")), directions(float_array(d, "directions")) {
+        : origins(float_array(o, "origins", 2, Rows::AnyNumber)), directions(float_array(d, "directions", 2, Rows::AnyNumber)) {
         count = origins.shape(0);
         if (directions.shape(0) != count)
             throw py::value_error("directions: " + std::to_string(directions.shape(0)) + " rays, origins " + std::to_string(count));

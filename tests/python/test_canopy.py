@@ -299,7 +299,7 @@ DOWN = np.array([[0, 0, -1], [0, 0, -1]], np.float32)
 
 BAD_QUERIES = [
     ({"origins": RAYS[:, :2]}, r"origins: shape \(2, 2\), expected \(n, 3\)"),
-    ({"origins": np.zeros((0, 3), np.float32), "directions": np.zeros((0, 3), np.float32)}, "origins: empty"),
+    ({"origins": np.zeros((0, 3), np.float32)}, "directions: 2 rays, origins 0"),
     ({"directions": DOWN[:1]}, "directions: 1 rays, origins 2"),
     ({"directions": DOWN.astype(np.complex128)}, "directions: dtype complex128"),
     ({"origins": with_value(RAYS, (1, 0))}, r"origins\[1\]: x is nan"),
@@ -319,3 +319,13 @@ def test_bad_queries_raise_value_errors_naming_the_argument(query, arguments, me
     call = {"origins": RAYS, "directions": DOWN, **arguments}
     with pytest.raises(ValueError, match=message):
         getattr(accel, query)(**call)
+
+
+def test_an_empty_batch_returns_empty_arrays(scene):
+    accel = build()
+    nothing = np.zeros((0, 3), np.float32)
+    t, triangle, u, v = accel.intersect(nothing, nothing)
+    for array, dtype in [(t, np.float32), (triangle, np.int32), (u, np.float32), (v, np.float32)]:
+        assert array.shape == (0,) and array.dtype == dtype
+    hit = accel.occluded(nothing, nothing, tmax=np.zeros(0, np.float32))
+    assert hit.shape == (0,) and hit.dtype == np.bool_
