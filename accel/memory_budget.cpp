@@ -202,11 +202,16 @@ MemoryAvailable available_memory(std::optional<uint64_t> limit) {
     return available;
 }
 
+// What would shrink the estimate most: the images when they outweigh everything the scene and its tree take.
+const char* remedy(const MemoryEstimate& estimate) {
+    if (estimate.frames > estimate.total() - estimate.frames) return "try a smaller image (--size)";
+    return "try a smaller scene or a builder that does not split";
+}
+
 void require_memory(const std::string& what, const MemoryEstimate& estimate, const MemoryAvailable& available) {
     if (estimate.total() <= available.bytes) return;
     throw MemoryError(what + ": not enough memory: building it needs about " + estimate.describe() + ", but " +
-                      format_bytes(available.bytes) + " is available (" + available.source +
-                      "); try a smaller scene or a builder that does not split");
+                      format_bytes(available.bytes) + " is available (" + available.source + "); " + remedy(estimate));
 }
 
 }  // namespace canopy
