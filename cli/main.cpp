@@ -66,6 +66,20 @@ std::string version_text() {
     return std::string("canopy ") + CANOPY_VERSION + (commit.empty() ? "" : ", commit " + commit);
 }
 
+// What a first word that names no command meant, where it names a feature of one: README and design call these
+// helpers, and a new user typed them as commands.
+std::string unknown_command(const std::string& word, const CLI::App& app) {
+    std::string names;
+    for (const CLI::App* sub : app.get_subcommands([](const CLI::App*) { return true; }))
+        names += (names.empty() ? "" : ", ") + sub->get_name();
+    const std::pair<const char*, const char*> features[] = {
+        {"dynamic", "bench --dynamic"}, {"heatmap", "render --heatmap"}, {"plot", "study, tradeoff or accuracy --plot"}};
+    std::string text = "unknown command '" + word + "'; the commands are " + names;
+    for (const auto& [name, where] : features)
+        if (word == name) text += " (" + word + ": " + where + ")";
+    return text;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -81,6 +95,11 @@ int main(int argc, char** argv) {
         [&](CLI::App& canopy) { register_reproduce(canopy, command); },
     };
     for (const auto& add : subcommands) add(app);
+    const auto named = [&](const CLI::App* sub) { return sub->check_name(argv[1]); };
+    if (argc > 1 && argv[1][0] != '-' && app.get_subcommands(named).empty()) {
+        if (distributed::is_root()) std::fprintf(stderr, "canopy: error: %s\n", unknown_command(argv[1], app).c_str());
+        return kUsageError;
+    }
     try {
         app.parse(argc, argv);  // runs the chosen subcommand once its options are parsed
         if (app.get_subcommands().empty()) {

@@ -32,10 +32,12 @@ PerRay counted(const Scene& scene, const FlatScene& flat, const CanopyOptions& o
     return {double(counts.inner_nodes + counts.leaf_nodes) / double(rays), double(counts.triangle_tests) / double(rays)};
 }
 
+// The shared scene, or nothing with a warning when it is absent (the test then checks nothing).
 std::optional<Scene> shared_scene(const char* name) {
     const std::filesystem::path path = std::filesystem::path(CANOPY_SHARED_SCENES) / name / "scene.json";
-    if (!std::filesystem::exists(path)) return std::nullopt;
-    return load_scene(path.string());
+    if (std::filesystem::exists(path)) return load_scene(path.string());
+    WARN("skipped: " << path << " is absent");
+    return std::nullopt;
 }
 
 }  // namespace
@@ -45,10 +47,7 @@ std::optional<Scene> shared_scene(const char* name) {
 // most 1.15x the flat tree's (1.07x), with fewer triangle tests than either.
 TEST_CASE("re-braiding visits fewer nodes than two-level and about as many as flat on crytek-sponza", "[regression]") {
     const std::optional<Scene> scene = shared_scene("crytek-sponza");
-    if (!scene) {
-        WARN("skipped: crytek-sponza is absent from " << CANOPY_SHARED_SCENES);
-        return;
-    }
+    if (!scene) return;
     const FlatScene flat = flatten(*scene);
     CanopyOptions options;
     const PerRay flat_tree = counted(*scene, flat, options);
@@ -79,10 +78,7 @@ TEST_CASE("early split clipping tests at most 0.6x the triangles of binned SAH o
 // policy that moves it by 2% must say so here.
 TEST_CASE("the binned SIMD tree's SAH on crytek-sponza stays within 2% of its pinned value", "[regression]") {
     const std::optional<Scene> scene = shared_scene("crytek-sponza");
-    if (!scene) {
-        WARN("skipped: crytek-sponza is absent from " << CANOPY_SHARED_SCENES);
-        return;
-    }
+    if (!scene) return;
     const FlatScene flat = flatten(*scene);
     auto accel = make_canopy_accelerator(*scene, flat, {"binned", "", "bvh4"});
     accel->prepare();
