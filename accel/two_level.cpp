@@ -159,8 +159,10 @@ void append_leaf(std::vector<TriangleBlock<W>, HugePageAllocator<TriangleBlock<W
     }
 }
 
-// Sec. 5.2: objects get #instances + max(#instances, #triangles / 1000) BRefs (the paper's #triangles / 1000
-// alone would not open every object's root once in crytek-sponza), instanced objects 4 x #instances; or as set.
+// Sec. 5.2: objects get max(4 x #instances, #instances + #triangles / 1000) BRefs, instanced objects 4 x #instances;
+// or as set. The paper's #triangles / 1000 alone would not open every object's root once in crytek-sponza, and
+// with twice the placements its re-braided tree visited 7% more nodes a ray than with four times
+// (docs/results.md#two-level-bvhs-and-re-braiding).
 size_t bref_capacity(const std::vector<ObjectTree>& objects, const std::vector<TwoLevelInstance>& instances,
                      const TwoLevelSettings& settings) {
     const size_t n = instances.size();
@@ -169,7 +171,7 @@ size_t bref_capacity(const std::vector<ObjectTree>& objects, const std::vector<T
     const bool instanced = n > objects.size();
     uint64_t triangles = 0;
     for (const TwoLevelInstance& i : instances) triangles += objects[i.object].triangles;
-    return std::max<size_t>(instanced ? 4 * n : n + std::max<size_t>(n, triangles / 1000), 1);
+    return std::max<size_t>(instanced ? 4 * n : std::max<size_t>(4 * n, n + triangles / 1000), 1);
 }
 
 constexpr uint32_t kMaxTopLevelBins = 64;  // the binning's arrays live on the stack

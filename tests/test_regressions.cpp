@@ -43,8 +43,8 @@ std::optional<Scene> shared_scene(const char* name) {
 }  // namespace
 
 // docs/results.md#two-level-bvhs-and-re-braiding: re-braiding closes most of the two-level structure's gap to the
-// flat tree. In visits: re-braided crytek-sponza visits a quarter fewer nodes a ray than two-level (0.75x), and at
-// most 1.15x the flat tree's (1.07x), with fewer triangle tests than either.
+// flat tree. In visits: re-braided crytek-sponza visits under 0.85x two-level's nodes a ray and at most 1.05x the
+// flat tree's, with fewer triangle tests than either.
 TEST_CASE("re-braiding visits fewer nodes than two-level and about as many as flat on crytek-sponza", "[regression]") {
     const std::optional<Scene> scene = shared_scene("crytek-sponza");
     if (!scene) return;
@@ -57,7 +57,7 @@ TEST_CASE("re-braiding visits fewer nodes than two-level and about as many as fl
     const PerRay rebraid = counted(*scene, flat, options);
     CAPTURE(flat_tree.nodes, two_level.nodes, rebraid.nodes, flat_tree.triangles, two_level.triangles, rebraid.triangles);
     CHECK(rebraid.nodes <= 0.85 * two_level.nodes);
-    CHECK(rebraid.nodes <= 1.15 * flat_tree.nodes);
+    CHECK(rebraid.nodes <= 1.05 * flat_tree.nodes);
     CHECK(rebraid.triangles < two_level.triangles);
     CHECK(rebraid.triangles < flat_tree.triangles);
 }

@@ -1,7 +1,7 @@
 // pathological_builds: every builder's binary-tree build time on each pathological scene (scenes/pathological.h)
 // against its time on as many random triangles, as a Markdown table. Each build runs in a child process of its
 // own, so one stopped at LIMIT times its random-triangle time (or that failed) cannot hold up or corrupt the rest.
-//   pathological_builds [TRIANGLES=1000000] [BUILDERS=all, or a comma list] [LIMIT=5]
+//   pathological_builds [TRIANGLES=1000000] [BUILDERS=all, or a comma list] [LIMIT=5] [SCENES=all, or a comma list]
 #include "accel/builder.h"
 #include "scenes/pathological.h"
 
@@ -114,6 +114,15 @@ std::string cell(const Outcome& o, double random_seconds) {
     return format("%.2f s", o.seconds) + (random_seconds > 0 ? format(" (%.2fx)", o.seconds / random_seconds) : "");
 }
 
+// The scenes named in `list` ("zero area,needles"), in the table's order; all for "all".
+std::vector<PathologicalScene> chosen_scenes(const std::string& list) {
+    std::vector<PathologicalScene> chosen;
+    for (const PathologicalScene& s : pathological_scenes())
+        if (list == "all" || ("," + list + ",").find("," + s.name + ",") != std::string::npos) chosen.push_back(s);
+    if (chosen.empty()) throw std::invalid_argument("no pathological scene is named in '" + list + "'");
+    return chosen;
+}
+
 std::vector<const BuilderEntry*> chosen_builders(const std::string& list) {
     std::vector<const BuilderEntry*> chosen;
     if (list == "all") {
@@ -132,7 +141,7 @@ int main(int argc, char** argv) {
         const size_t n = argc > 1 ? std::stoul(argv[1]) : 1'000'000;
         const std::vector<const BuilderEntry*> chosen = chosen_builders(argc > 2 ? argv[2] : "all");
         const double limit = argc > 3 ? std::stod(argv[3]) : 5.0;
-        const std::vector<PathologicalScene>& scenes = pathological_scenes();
+        const std::vector<PathologicalScene> scenes = chosen_scenes(argc > 4 ? argv[4] : "all");
         std::printf("| builder | random |");
         for (const PathologicalScene& s : scenes) std::printf(" %s |", s.name.c_str());
         std::printf("\n|---|---|");
