@@ -161,8 +161,8 @@ void append_leaf(std::vector<TriangleBlock<W>, HugePageAllocator<TriangleBlock<W
 
 // Sec. 5.2: objects get max(4 x #instances, #instances + #triangles / 1000) BRefs, instanced objects 4 x #instances;
 // or as set. The paper's #triangles / 1000 alone would not open every object's root once in crytek-sponza, and
-// with twice the placements its re-braided tree visited 7% more nodes a ray than with four times
-// (docs/results.md#two-level-bvhs-and-re-braiding).
+// an array of twice the placements left its re-braided tree visiting more nodes a ray than the flat tree
+// (docs/results.md#closing-the-two-level-gap-on-crytek-sponza-re-braiding-paper-table-1).
 size_t bref_capacity(const std::vector<ObjectTree>& objects, const std::vector<TwoLevelInstance>& instances,
                      const TwoLevelSettings& settings) {
     const size_t n = instances.size();

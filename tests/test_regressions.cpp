@@ -43,8 +43,8 @@ std::optional<Scene> shared_scene(const char* name) {
 }  // namespace
 
 // docs/results.md#two-level-bvhs-and-re-braiding: re-braiding closes most of the two-level structure's gap to the
-// flat tree. In visits: re-braided crytek-sponza visits under 0.85x two-level's nodes a ray and at most 1.05x the
-// flat tree's, with fewer triangle tests than either.
+// flat tree. In visits: re-braided crytek-sponza visits well fewer nodes a ray than two-level and about as many as
+// the flat tree, with fewer triangle tests than either.
 TEST_CASE("re-braiding visits fewer nodes than two-level and about as many as flat on crytek-sponza", "[regression]") {
     const std::optional<Scene> scene = shared_scene("crytek-sponza");
     if (!scene) return;
@@ -63,7 +63,7 @@ TEST_CASE("re-braiding visits fewer nodes than two-level and about as many as fl
 }
 
 // docs/papers/ernst-greiner-2007.md: early split clipping cuts the triangles a ray tests on the mirror's slivers
-// to about half the plain tree's (0.48x on these diffuse paths).
+// to about half the plain tree's.
 TEST_CASE("early split clipping tests at most 0.6x the triangles of binned SAH on gen:mirror", "[regression]") {
     const Scene scene = load_scene("gen:mirror");
     const FlatScene flat = flatten(scene);
@@ -74,8 +74,8 @@ TEST_CASE("early split clipping tests at most 0.6x the triangles of binned SAH o
 }
 
 // docs/results.md#headline-binned-and-sbvh-against-embree: the binned tree of the SIMD kernels (leaves charged per
-// block of 4, up to 16 triangles) on crytek-sponza has an SAH of 103.59; a change to the builder or its leaf
-// policy that moves it by 2% must say so here.
+// block of 4, up to 16 triangles) on crytek-sponza has a pinned SAH; a change to the builder or its leaf policy
+// that moves it must say so here.
 TEST_CASE("the binned SIMD tree's SAH on crytek-sponza stays within 2% of its pinned value", "[regression]") {
     const std::optional<Scene> scene = shared_scene("crytek-sponza");
     if (!scene) return;
