@@ -18,39 +18,41 @@ constexpr uint32_t kSeeds = 8;  // slots either side tried before the tree searc
 // Walter et al.'s distance for BVH clusters: the surface area (here the half area) of the box around both.
 float distance(const BBox& a, const BBox& b) { return merge(a, b).half_area(); }
 
-// A lower bound of d(A, B) over every B whose centre lies in `centres`: the merged box holds A and B's
-// centre, so at least A grown to the point of `centres` nearest to it. Bounding centres rather than boxes
-// (a tree over cluster positions, like Walter et al.'s kd-tree) keeps a few large triangles from making the
-// bound useless across the whole scene.
-float distance_bound(const BBox& a, const BBox& centres) {
-    BBox grown = a;
-    grown.extend(glm::clamp(a.lower, centres.lower, centres.upper));
-    grown.extend(glm::clamp(a.upper, centres.lower, centres.upper));
-    return grown.half_area();
+// A lower bound of d(A, B) over every B whose centre lies in `centres` and whose half extent is at least
+// `min_half` on each axis: on each axis the merged box spans A and B's interval, narrowest for B's centre
+// nearest A's centre. Bounding centres rather than boxes (a tree over cluster positions, like Walter et al.'s
+// kd-tree) keeps a few large triangles from making the bound useless across the whole scene; the least half
+// extent keeps large clusters that all overlap (long parallel needles, big random triangles) from doing so.
+float distance_bound(const BBox& a, const BBox& centres, const Vec3& min_half) {
+    const Vec3 nearest_centre = glm::clamp(a.center(), centres.lower, centres.upper);
+    return merge(a, BBox{nearest_centre - min_half, nearest_centre + min_half}).half_area();
 }
 
 // The auxiliary tree of the nearest-neighbour search (the role of Walter et al.'s kd-tree): a complete binary
 // tree over slots in Morton order of the initial clusters, each node the box of the centres of the live
-// clusters below it (a slot keeps its cluster's box as well, for the exact distance). A merged cluster takes
+// clusters below it with their least half extent per axis (a slot keeps its cluster's box as well, for the
+// exact distance). A merged cluster takes
 // its first part's slot, the second part's slot empties, and both paths to the root are refit, so the boxes
 // stay exact as clusters grow and disappear.
 class SlotTree {
 public:
     explicit SlotTree(uint32_t slots)
-        : size_(std::bit_ceil(std::max(slots, 2u))), centres_(2 * size_t(size_)), boxes_(size_) {}
+        : size_(std::bit_ceil(std::max(slots, 2u))),
+          centres_(2 * size_t(size_)),
+          min_half_(2 * size_t(size_), Vec3(std::numeric_limits<float>::infinity())),
+          boxes_(size_) {}
 
     // Fills the leaves then every inner node, without refitting paths one by one.
     template <class BoxOf>
     void assign_all(uint32_t slots, BoxOf&& box_of) {
         for (uint32_t s = 0; s < slots; ++s) set_leaf(s, box_of(s));
-        for (uint32_t node = size_ - 1; node >= 1; --node) centres_[node] = merge(centres_[2 * node], centres_[2 * node + 1]);
+        for (uint32_t node = size_ - 1; node >= 1; --node) refit(node);
     }
 
     // An empty box empties the slot.
     void set(uint32_t slot, const BBox& box) {
         set_leaf(slot, box);
-        for (uint32_t node = (size_ + slot) / 2; node >= 1; node /= 2)
-            centres_[node] = merge(centres_[2 * node], centres_[2 * node + 1]);
+        for (uint32_t node = (size_ + slot) / 2; node >= 1; node /= 2) refit(node);
     }
 
     // The slot, other than `self`, whose cluster is nearest to `box`. Of equally near ones, the first in the
@@ -73,7 +75,7 @@ public:
         stack[top++] = 1;
         while (top > 0) {
             const uint32_t node = stack[--top];
-            if (centres_[node].empty() || (best != kNone && distance_bound(box, centres_[node]) >= best_distance)) continue;
+            if (centres_[node].empty() || (best != kNone && bound(box, node) >= best_distance)) continue;
             if (node >= size_) {
                 const uint32_t slot = node - size_;
                 const float d = distance(box, boxes_[slot]);
@@ -81,7 +83,7 @@ public:
                 continue;
             }
             // Nearer child on top, so it is searched first and tightens the bound for the other.
-            const float left = distance_bound(box, centres_[2 * node]), right = distance_bound(box, centres_[2 * node + 1]);
+            const float left = bound(box, 2 * node), right = bound(box, 2 * node + 1);
             stack[top++] = left <= right ? 2 * node + 1 : 2 * node;
             stack[top++] = left <= right ? 2 * node : 2 * node + 1;
         }
@@ -89,13 +91,25 @@ public:
     }
 
 private:
+    // Half extents a hair under the exact ones, so that rounding in the bound never prunes an equally near slot.
+    static constexpr float kShrink = 1.0f - 0x1p-20f;
+
     void set_leaf(uint32_t slot, const BBox& box) {
         boxes_[slot] = box;
         centres_[size_ + slot] = box.empty() ? BBox{} : BBox{box.center(), box.center()};
+        min_half_[size_ + slot] = box.empty() ? Vec3(std::numeric_limits<float>::infinity()) : 0.5f * kShrink * box.extent();
     }
+
+    void refit(uint32_t node) {
+        centres_[node] = merge(centres_[2 * node], centres_[2 * node + 1]);
+        min_half_[node] = glm::min(min_half_[2 * node], min_half_[2 * node + 1]);
+    }
+
+    float bound(const BBox& box, uint32_t node) const { return distance_bound(box, centres_[node], min_half_[node]); }
 
     uint32_t size_;              // leaves: slots rounded up to a power of two
     std::vector<BBox> centres_;  // heap order: node k has children 2k and 2k + 1, leaves from size_ on
+    std::vector<Vec3> min_half_;  // heap order: the least half extent per axis of the live clusters below
     std::vector<BBox> boxes_;    // by slot: the live cluster's box
 };
 
