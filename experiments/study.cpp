@@ -23,6 +23,19 @@
 #include <tuple>
 
 namespace canopy {
+
+std::optional<double> pearson(const std::vector<double>& x, const std::vector<double>& y) {
+    const double n = double(x.size());
+    double mx = 0, my = 0;
+    for (size_t i = 0; i < x.size(); ++i) mx += x[i] / n, my += y[i] / n;
+    double sxy = 0, sxx = 0, syy = 0;
+    for (size_t i = 0; i < x.size(); ++i) {
+        sxy += (x[i] - mx) * (y[i] - my), sxx += (x[i] - mx) * (x[i] - mx), syy += (y[i] - my) * (y[i] - my);
+    }
+    if (sxx <= 0 || syy <= 0) return std::nullopt;
+    return sxy / std::sqrt(sxx * syy);
+}
+
 namespace {
 
 // Sec. 4.4: 45 degrees about the (1, 1, 1) axis, here through the scene's centre so the scene stays in view.
@@ -60,19 +73,6 @@ std::pair<double, double> alternating_ns_per_ray(const Accelerator& a, const Acc
         best_b = std::min(best_b, pass_ns_per_ray(b, rays));
     }
     return {best_a, best_b};
-}
-
-// Eq. 5, Pearson's correlation; none when either side does not vary.
-std::optional<double> pearson(const std::vector<double>& x, const std::vector<double>& y) {
-    const double n = double(x.size());
-    double mx = 0, my = 0;
-    for (size_t i = 0; i < x.size(); ++i) mx += x[i] / n, my += y[i] / n;
-    double sxy = 0, sxx = 0, syy = 0;
-    for (size_t i = 0; i < x.size(); ++i) {
-        sxy += (x[i] - mx) * (y[i] - my), sxx += (x[i] - mx) * (x[i] - mx), syy += (y[i] - my) * (y[i] - my);
-    }
-    if (sxx <= 0 || syy <= 0) return std::nullopt;
-    return sxy / std::sqrt(sxx * syy);
 }
 
 // (1 - alpha - beta) SAH + alpha EPO + beta LCV: eq. 7, and eq. 6 with beta = 0.

@@ -64,6 +64,9 @@ nlohmann::json study_json(const StudyResult& result);
 // `canopy study`, its options and its run.
 void register_study(CLI::App& canopy);
 
+// Eq. 5 of the paper, Pearson's correlation; none when either side does not vary.
+std::optional<double> pearson(const std::vector<double>& x, const std::vector<double>& y);
+
 // Eq. 4 of the paper: the standard deviation of the number of leaves each ray visits (closest hit).
 double leaf_count_variability(const Accelerator& accel, const std::vector<Ray>& rays);
 
