@@ -393,6 +393,20 @@ template <Query Q, int N, class Tree, class Counter, class LeafFn>
                     current = {node.child[a], counts[a], tnear[a]};
                     continue;
                 }
+                // Any hit needs a hit, not the nearest: no sorting by distance, and the children in the tree's
+                // order, leaves first, each a chance to end the ray before another node's fetch
+                // (docs/results.md#any-hit-on-random-rays).
+                if constexpr (Q == Query::Any) {
+                    const uint32_t hit_lanes = uint32_t(mask) | (1u << a);
+                    uint32_t leaf_lanes = 0;
+                    for (uint32_t m = hit_lanes; m; m &= m - 1) leaf_lanes |= uint32_t(counts[lowest_lane(m)] != 0) << lowest_lane(m);
+                    const size_t first = leaf_lanes ? lowest_lane(leaf_lanes) : a;
+                    const uint32_t rest = hit_lanes & ~(1u << first);
+                    for (const uint32_t group : {rest & ~leaf_lanes, rest & leaf_lanes})  // popped last: inner nodes
+                        for (uint32_t m = group; m; m &= m - 1) *sp++ = {node.child[lowest_lane(m)], counts[lowest_lane(m)], tnear[lowest_lane(m)]};
+                    current = {node.child[first], counts[first], tnear[first]};
+                    continue;
+                }
                 const size_t b = lowest_lane(mask);
                 mask &= mask - 1;
                 if (!mask) {  // two: go to the nearer, keep the farther

@@ -274,8 +274,13 @@ void traverse_packets(const WideBvh<N>& bvh, std::span<const Ray> rays, std::spa
         size_t first = 0;
         for (size_t i = 1; i <= rays.size(); ++i) {
             if (i == rays.size() || i - first == size_t(detail::kPacketRays) || detail::octant(rays[i]) != detail::octant(rays[first])) {
-                detail::trace_packet<Q, TriangleTest>(bvh, rays.data() + first, hits.data() + first, uint32_t(i - first), Robust,
-                                                      counter);
+                // A run too short for a packet (unsorted rays: most runs of one octant are a ray or two) goes ray by
+                // ray, without the packet's set-up, as trace_packet would send it on at once.
+                if (i - first < size_t(kPacketSwitch))
+                    detail::trace_each<Q, Robust, TriangleTest>(bvh, rays.subspan(first, i - first), hits.subspan(first, i - first), counter);
+                else
+                    detail::trace_packet<Q, TriangleTest>(bvh, rays.data() + first, hits.data() + first, uint32_t(i - first), Robust,
+                                                          counter);
                 first = i;
             }
         }

@@ -6,6 +6,7 @@
 #include "renderer/camera.h"
 #include "renderer/sampling.h"
 #include "scenes/scene.h"
+#include "tools/embree_scene.h"
 
 #include <CLI/CLI.hpp>
 #include <embree3/rtcore.h>
@@ -36,48 +37,6 @@ struct Options {
     std::vector<int> size{1024, 768};
     int frames = 10;
     int threads = 0;
-};
-
-// The scene's triangles as one Embree geometry over shared buffers, built at MEDIUM quality (binned SAH), as
-// canopy's `embree medium` row builds it.
-class EmbreeScene {
-public:
-    EmbreeScene(const canopy::FlatScene& flat, int threads) {
-        const std::string config = threads > 0 ? "threads=" + std::to_string(threads) : "";
-        device_ = rtcNewDevice(config.c_str());
-        if (!device_) throw std::runtime_error("Embree: cannot create a device");
-        vertices_.resize(flat.triangles.size() * 9 + 1);  // Embree reads vertices with 16-byte loads: one float of padding
-        std::memcpy(vertices_.data(), flat.triangles.data(), flat.triangles.size() * sizeof(canopy::Triangle));
-        indices_.resize(flat.triangles.size() * 3);
-        for (uint32_t i = 0; i < indices_.size(); ++i) indices_[i] = i;
-        scene_ = rtcNewScene(device_);
-        rtcSetSceneBuildQuality(scene_, RTC_BUILD_QUALITY_MEDIUM);
-        RTCGeometry geometry = rtcNewGeometry(device_, RTC_GEOMETRY_TYPE_TRIANGLE);
-        rtcSetGeometryBuildQuality(geometry, RTC_BUILD_QUALITY_MEDIUM);
-        rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, vertices_.data(), 0,
-                                   3 * sizeof(float), flat.triangles.size() * 3);
-        rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, indices_.data(), 0,
-                                   3 * sizeof(uint32_t), flat.triangles.size());
-        rtcCommitGeometry(geometry);
-        rtcAttachGeometry(scene_, geometry);
-        rtcReleaseGeometry(geometry);
-        rtcCommitScene(scene_);
-        if (rtcGetDeviceError(device_) != RTC_ERROR_NONE) throw std::runtime_error("Embree: scene build failed");
-    }
-    ~EmbreeScene() {
-        rtcReleaseScene(scene_);
-        rtcReleaseDevice(device_);
-    }
-    EmbreeScene(const EmbreeScene&) = delete;
-    EmbreeScene& operator=(const EmbreeScene&) = delete;
-
-    RTCScene scene() const { return scene_; }
-
-private:
-    RTCDevice device_ = nullptr;
-    RTCScene scene_ = nullptr;
-    std::vector<float> vertices_;
-    std::vector<uint32_t> indices_;
 };
 
 RTCRayHit closest_hit(RTCScene scene, const Ray& ray) {
@@ -153,7 +112,7 @@ int run(const Options& o) {
     std::unique_ptr<tbb::global_control> limit;
     if (o.threads > 0) limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, size_t(o.threads));
     const auto build_start = std::chrono::steady_clock::now();
-    const EmbreeScene embree(flat, o.threads);
+    const canopy::tools::EmbreeScene embree(flat, o.threads);
     const double build_ms = ms_since(build_start);
     const int w = o.size[0], h = o.size[1];
     const canopy::PinholeCamera camera(canopy::scene_camera(loaded, flat), w, h);
