@@ -109,28 +109,20 @@ struct EmbreeQueries {
         });
     }
     void closest16(std::vector<char>& hit) const {
-        in_chunks(rays.size(), [&](size_t first, size_t count) {
-            RTCIntersectContext c = context(RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT);
-            for (size_t p = first; p < first + count; p += 16) {
-                alignas(64) RTCRayHit16 rh;
-                alignas(64) int valid[16];
-                fill16(rh.ray, valid, p, first + count);
-                for (int k = 0; k < 16; ++k) rh.hit.geomID[k] = RTC_INVALID_GEOMETRY_ID;
-                rtcIntersect16(valid, scene, &c, &rh);
-                for (size_t k = 0; k < 16 && p + k < first + count; ++k) hit[p + k] = rh.hit.geomID[k] != RTC_INVALID_GEOMETRY_ID;
-            }
+        in_packets([&](RTCIntersectContext& c, const int* valid, size_t p, size_t end) {
+            alignas(64) RTCRayHit16 rh;
+            fill16(rh.ray, p, end);
+            for (int k = 0; k < 16; ++k) rh.hit.geomID[k] = RTC_INVALID_GEOMETRY_ID;
+            rtcIntersect16(valid, scene, &c, &rh);
+            for (size_t k = 0; k < 16 && p + k < end; ++k) hit[p + k] = rh.hit.geomID[k] != RTC_INVALID_GEOMETRY_ID;
         });
     }
     void any16(std::vector<char>& hit) const {
-        in_chunks(rays.size(), [&](size_t first, size_t count) {
-            RTCIntersectContext c = context(RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT);
-            for (size_t p = first; p < first + count; p += 16) {
-                alignas(64) RTCRay16 ray;
-                alignas(64) int valid[16];
-                fill16(ray, valid, p, first + count);
-                rtcOccluded16(valid, scene, &c, &ray);
-                for (size_t k = 0; k < 16 && p + k < first + count; ++k) hit[p + k] = ray.tfar[k] < 0.0f;
-            }
+        in_packets([&](RTCIntersectContext& c, const int* valid, size_t p, size_t end) {
+            alignas(64) RTCRay16 ray;
+            fill16(ray, p, end);
+            rtcOccluded16(valid, scene, &c, &ray);
+            for (size_t k = 0; k < 16 && p + k < end; ++k) hit[p + k] = ray.tfar[k] < 0.0f;
         });
     }
     void closest1m(std::vector<char>& hit) const {
@@ -153,11 +145,23 @@ struct EmbreeQueries {
     }
 
 private:
+    // `packet`(context, valid, first ray, end of the chunk) for each 16 consecutive rays, on TBB's threads.
+    template <class Packet>
+    void in_packets(Packet&& packet) const {
+        in_chunks(rays.size(), [&](size_t first, size_t count) {
+            RTCIntersectContext c = context(RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT);
+            for (size_t p = first; p < first + count; p += 16) {
+                alignas(64) int valid[16];
+                for (size_t k = 0; k < 16; ++k) valid[k] = p + k < first + count ? -1 : 0;
+                packet(c, valid, p, first + count);
+            }
+        });
+    }
+
     template <class Ray16>
-    void fill16(Ray16& r, int* valid, size_t p, size_t end) const {
+    void fill16(Ray16& r, size_t p, size_t end) const {
         for (size_t k = 0; k < 16; ++k) {
             const size_t i = std::min(p + k, end - 1);
-            valid[k] = p + k < end ? -1 : 0;
             r.org_x[k] = rays.origins[3 * i], r.org_y[k] = rays.origins[3 * i + 1], r.org_z[k] = rays.origins[3 * i + 2];
             r.dir_x[k] = rays.directions[3 * i], r.dir_y[k] = rays.directions[3 * i + 1], r.dir_z[k] = rays.directions[3 * i + 2];
             r.tnear[k] = 0.0f, r.tfar[k] = kInf, r.time[k] = 0.0f, r.mask[k] = 0xffffffffu, r.id[k] = 0, r.flags[k] = 0;
