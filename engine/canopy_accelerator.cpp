@@ -122,7 +122,7 @@ public:
             default: return "";
         }
     }
-    // "rebraid@5%" for a re-braided top level with another than the paper's opening threshold.
+    // "rebraid@5%" for a re-braided top level with another than the default opening threshold.
     std::string top_level_name() const {
         if (options_.toplevel != "rebraid" || options_.rebraid_threshold == TwoLevelSettings{}.open_extent) return options_.toplevel;
         char percent[32];

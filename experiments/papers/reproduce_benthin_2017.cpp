@@ -81,7 +81,7 @@ const BenchRow* canopy_row(const BenchScene& scene, const std::string& builder, 
 std::string rebraid_name(float threshold) {
     char text[32];
     std::snprintf(text, sizeof text, "rebraid@%g%%/binned", 100.0 * threshold);
-    return threshold == kPaperThreshold ? "rebraid/binned" : text;
+    return threshold == TwoLevelSettings{}.open_extent ? "rebraid/binned" : text;
 }
 
 double get(const BenchRow* row, double BenchRow::*figure) { return row ? row->*figure : kNotMeasured; }
@@ -98,7 +98,7 @@ struct Measured {
 
 Measured measured(const BenchScene& scene) {
     Measured m{scene.scene, {}, {}, {}, {}, kNotMeasured, kNotMeasured, {}, {}, {}};
-    const BenchRow* rows[3] = {canopy_row(scene, "two-level/binned"), canopy_row(scene, "rebraid/binned"),
+    const BenchRow* rows[3] = {canopy_row(scene, "two-level/binned"), canopy_row(scene, rebraid_name(kPaperThreshold)),
                                      canopy_row(scene, "binned")};
     for (int k = 0; k < 3; ++k) {
         m.sah[k] = get(rows[k], &BenchRow::layout_sah), m.frame[k] = get(rows[k], &BenchRow::frame_ms_mean);
@@ -174,7 +174,8 @@ std::string table3(const std::vector<BenchScene>& dynamic) {
             if (r.builder == "two-level/binned") two_level = &r;
         for (const BenchRow& r : scene.rows) {
             const std::string& builder = r.builder;
-            if (builder != "binned" && builder != "lbvh" && builder != "two-level/binned" && builder != "rebraid/binned") continue;
+            if (builder != "binned" && builder != "lbvh" && builder != "two-level/binned" && builder != rebraid_name(kPaperThreshold))
+                continue;
             rows.push_back({scene.scene + ": " + builder, format("%.2f", r.rebuild_ms_mean), format("%.2f", r.frame_ms_mean),
                             format("%.2f", r.total_ms_mean),
                             two_level ? format("%.2fx", r.total_ms_mean / two_level->total_ms_mean) : "-"});
@@ -199,7 +200,7 @@ std::optional<DynamicFrames> dynamic_frames(const BenchScene& scene) {
             if (r.builder == builder) return r.frame_ms_mean;
         return std::nullopt;
     };
-    const std::optional<double> single = frame("binned"), two_level = frame("two-level/binned"), rebraid = frame("rebraid/binned");
+    const std::optional<double> single = frame("binned"), two_level = frame("two-level/binned"), rebraid = frame(rebraid_name(kPaperThreshold).c_str());
     if (!single || !two_level || !rebraid) return std::nullopt;
     return DynamicFrames{*single, *two_level, *rebraid};
 }
