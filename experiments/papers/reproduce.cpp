@@ -126,8 +126,8 @@ void progress_section(const char* paper, const std::string& section) {
 
 std::string format(const char* fmt, double value) {
     if (std::isnan(value)) return "-";
-    char text[64];
-    std::snprintf(text, sizeof text, fmt, value);
+    std::string text(size_t(std::snprintf(nullptr, 0, fmt, value)), '\0');
+    std::snprintf(text.data(), text.size() + 1, fmt, value);
     return text;
 }
 
