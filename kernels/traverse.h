@@ -402,8 +402,12 @@ template <Query Q, int N, class Tree, class Counter, class LeafFn>
                     for (uint32_t m = hit_lanes; m; m &= m - 1) leaf_lanes |= uint32_t(counts[lowest_lane(m)] != 0) << lowest_lane(m);
                     const size_t first = leaf_lanes ? lowest_lane(leaf_lanes) : a;
                     const uint32_t rest = hit_lanes & ~(1u << first);
-                    for (const uint32_t group : {rest & ~leaf_lanes, rest & leaf_lanes})  // popped last: inner nodes
-                        for (uint32_t m = group; m; m &= m - 1) *sp++ = {node.child[lowest_lane(m)], counts[lowest_lane(m)], tnear[lowest_lane(m)]};
+                    // Inner nodes pushed first, so that the leaves above them are popped first.
+                    for (const uint32_t group : {rest & ~leaf_lanes, rest & leaf_lanes})
+                        for (uint32_t m = group; m; m &= m - 1) {
+                            const size_t i = lowest_lane(m);
+                            *sp++ = {node.child[i], counts[i], tnear[i]};
+                        }
                     current = {node.child[first], counts[first], tnear[first]};
                     continue;
                 }

@@ -1,6 +1,6 @@
 #pragma once
-// The tools' Embree scene: a flat scene's triangles as one Embree 3 geometry over shared buffers, built as canopy's
-// `embree QUALITY` rows build it, with Embree's API alone.
+// The tools' Embree scene: a flat scene's triangles as one Embree 3 geometry over shared buffers, built at MEDIUM
+// quality (binned SAH) as canopy's `embree medium` row builds it, with Embree's API alone.
 #include "scenes/scene.h"
 
 #include <embree3/rtcore.h>
@@ -12,10 +12,9 @@
 
 namespace canopy::tools {
 
-// The scene's triangles as one Embree geometry, MEDIUM quality (binned SAH) unless asked otherwise.
 class EmbreeScene {
 public:
-    EmbreeScene(const canopy::FlatScene& flat, int threads, RTCBuildQuality quality = RTC_BUILD_QUALITY_MEDIUM) {
+    EmbreeScene(const canopy::FlatScene& flat, int threads) {
         const std::string config = threads > 0 ? "threads=" + std::to_string(threads) : "";
         device_ = rtcNewDevice(config.c_str());
         if (!device_) throw std::runtime_error("Embree: cannot create a device");
@@ -24,9 +23,9 @@ public:
         indices_.resize(flat.triangles.size() * 3);
         for (uint32_t i = 0; i < indices_.size(); ++i) indices_[i] = i;
         scene_ = rtcNewScene(device_);
-        rtcSetSceneBuildQuality(scene_, quality);
+        rtcSetSceneBuildQuality(scene_, RTC_BUILD_QUALITY_MEDIUM);
         RTCGeometry geometry = rtcNewGeometry(device_, RTC_GEOMETRY_TYPE_TRIANGLE);
-        rtcSetGeometryBuildQuality(geometry, quality);
+        rtcSetGeometryBuildQuality(geometry, RTC_BUILD_QUALITY_MEDIUM);
         rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, vertices_.data(), 0,
                                    3 * sizeof(float), flat.triangles.size() * 3);
         rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, indices_.data(), 0,

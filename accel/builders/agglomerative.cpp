@@ -31,9 +31,8 @@ float distance_bound(const BBox& a, const BBox& centres, const Vec3& min_half) {
 // The auxiliary tree of the nearest-neighbour search (the role of Walter et al.'s kd-tree): a complete binary
 // tree over slots in Morton order of the initial clusters, each node the box of the centres of the live
 // clusters below it with their least half extent per axis (a slot keeps its cluster's box as well, for the
-// exact distance). A merged cluster takes
-// its first part's slot, the second part's slot empties, and both paths to the root are refit, so the boxes
-// stay exact as clusters grow and disappear.
+// exact distance). A merged cluster takes its first part's slot, the second part's slot empties, and both
+// paths to the root are refit, so the boxes stay exact as clusters grow and disappear.
 class SlotTree {
 public:
     explicit SlotTree(uint32_t slots)

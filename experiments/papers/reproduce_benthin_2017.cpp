@@ -195,14 +195,10 @@ struct DynamicFrames {
 };
 
 std::optional<DynamicFrames> dynamic_frames(const BenchScene& scene) {
-    const auto frame = [&](const char* builder) -> std::optional<double> {
-        for (const BenchRow& r : scene.rows)
-            if (r.builder == builder) return r.frame_ms_mean;
-        return std::nullopt;
-    };
-    const std::optional<double> single = frame("binned"), two_level = frame("two-level/binned"), rebraid = frame(rebraid_name(kPaperThreshold).c_str());
+    const BenchRow *single = canopy_row(scene, "binned"), *two_level = canopy_row(scene, "two-level/binned"),
+                   *rebraid = canopy_row(scene, rebraid_name(kPaperThreshold));
     if (!single || !two_level || !rebraid) return std::nullopt;
-    return DynamicFrames{*single, *two_level, *rebraid};
+    return DynamicFrames{single->frame_ms_mean, two_level->frame_ms_mean, rebraid->frame_ms_mean};
 }
 
 // Why rebraid+dyn against two-level+dyn differs from the paper's: a re-braided frame can at best reach the single

@@ -196,7 +196,7 @@ std::string scene_table(const StandIn& s, const std::vector<Measured>& rows, boo
 struct SettingResult {
     const Setting* setting;
     std::vector<std::vector<Measured>> scenes;  // per subject
-    double floor_s = kNotMeasured;              // the frame no structure changes (floor_frame), the paper's setting only
+    double floor_s = kNotMeasured;              // kFloorScene's frame, the paper's setting only
 };
 
 // A one-triangle scene: its frame is the camera rays, their set-up, the sky and the film, with a traversal of one box
