@@ -4,6 +4,7 @@
 #include "engine/options.h"
 #include "experiments/command.h"
 #include "experiments/plot.h"
+#include "kernels/precise_distance.h"
 #include "renderer/distributed.h"
 #include "renderer/frames.h"
 
@@ -17,6 +18,7 @@
 #include <cstdio>
 #include <fstream>
 #include <memory>
+#include <numbers>
 #include <random>
 #include <stdexcept>
 
@@ -76,11 +78,34 @@ std::vector<AccuracyCase> accuracy_cases() {
 
 namespace {
 
-// The exact distance along the float ray to the plane of the triangle it hit, in double.
+// The exact distance along the float ray to the plane of the triangle it hit, in long double (64-bit significands,
+// 11 bits more than precise_t's double): the oracle of the kernel's t and of precise_t's.
 double exact_distance(const Ray& ray, const Triangle& t) {
-    const glm::dvec3 v0(t.v0), e1 = glm::dvec3(t.v1) - v0, e2 = glm::dvec3(t.v2) - v0;
-    const glm::dvec3 n = glm::cross(e1, e2);
-    return glm::dot(n, v0 - glm::dvec3(ray.org)) / glm::dot(n, glm::dvec3(ray.dir));
+    using LongVec3 = glm::vec<3, long double>;
+    const LongVec3 v0(t.v0), e1 = LongVec3(t.v1) - v0, e2 = LongVec3(t.v2) - v0;
+    const LongVec3 n = glm::cross(e1, e2);
+    return double(glm::dot(n, v0 - LongVec3(ray.org)) / glm::dot(n, LongVec3(ray.dir)));
+}
+
+// A hit's exact distance and the relative errors of the kernel's t and of precise_t's rounded to float, the
+// distance a caller of precise_t reports.
+struct HitDistance {
+    double exact, kernel_error, precise_error;
+};
+
+HitDistance hit_distance(const Ray& ray, const Hit& hit, const Triangle& t, double precise) {
+    const double exact = exact_distance(ray, t);
+    const auto relative_error = [exact](float distance) { return std::abs(double(distance) - exact) / exact; };
+    return {exact, relative_error(hit.t), relative_error(float(precise))};
+}
+
+RelativeErrors relative_errors(std::vector<double> errors) {
+    RelativeErrors r{errors.size()};
+    if (errors.empty()) return r;
+    std::sort(errors.begin(), errors.end());
+    const auto quantile = [&](double q) { return errors[std::min(errors.size() - 1, size_t(q * double(errors.size())))]; };
+    r.p99 = quantile(0.99), r.p999 = quantile(0.999), r.max = errors.back();
+    return r;
 }
 
 // The spacing of floats at the largest coordinate of p: the error a float point cannot avoid.
@@ -97,29 +122,43 @@ struct Mode {
     bool robust, watertight;
 };
 
-AccuracyRow measure_case(const AccuracyOptions& o, const AccuracyCase& c, const Mode& mode,
-                         const std::vector<Triangle>& sphere, const std::vector<Ray>& rays, const FlatScene& flat) {
+struct TracedRays {
+    std::string kernel;
+    std::vector<Hit> hits;
+    double ns_per_ray = 0;
+};
+
+// Every ray's closest hit through a tree of `flat` in one intersector and traversal mode, in parallel.
+TracedRays trace_all(const AccuracyOptions& o, const Mode& mode, const FlatScene& flat, const std::vector<Ray>& rays) {
     const auto accel = make_canopy_accelerator(flat, {o.builder, "", o.kernel, mode.robust, mode.watertight});
     accel->prepare();
     accel->build();
-    std::vector<Hit> hits(rays.size());
+    TracedRays traced{accel->kernel(), std::vector<Hit>(rays.size())};
     const auto start = std::chrono::steady_clock::now();
-    tbb::parallel_for(size_t(0), rays.size(), [&](size_t i) { hits[i] = accel->trace(rays[i]); });
+    tbb::parallel_for(size_t(0), rays.size(), [&](size_t i) { traced.hits[i] = accel->trace(rays[i]); });
     const double ns = std::chrono::duration<double, std::nano>(std::chrono::steady_clock::now() - start).count();
+    traced.ns_per_ray = ns / double(rays.size());
+    return traced;
+}
 
-    AccuracyRow row{c, accel->kernel(), rays.size()};
-    row.ns_per_ray = ns / double(rays.size());
+AccuracyRow measure_case(const AccuracyOptions& o, const AccuracyCase& c, const Mode& mode,
+                         const std::vector<Triangle>& sphere, const std::vector<Ray>& rays, const FlatScene& flat) {
+    const TracedRays traced = trace_all(o, mode, flat, rays);
+    AccuracyRow row{c, traced.kernel, rays.size()};
+    row.ns_per_ray = traced.ns_per_ray;
     std::vector<double> t_errors;
     t_errors.reserve(rays.size());
     for (size_t i = 0; i < rays.size(); ++i) {
-        if (!hits[i].found()) {
+        const Hit& hit = traced.hits[i];
+        if (!hit.found()) {
             ++row.leaks;
             continue;
         }
-        const double exact = exact_distance(rays[i], sphere[hits[i].prim]);
-        t_errors.push_back(std::abs(double(hits[i].t) - exact) / exact);
-        const Vec3 p = rays[i].org + hits[i].t * rays[i].dir;  // as the renderer computes it
-        const glm::dvec3 p_exact = glm::dvec3(rays[i].org) + exact * glm::dvec3(rays[i].dir);
+        const HitDistance distance = hit_distance(rays[i], hit, sphere[hit.prim], precise_t(sphere[hit.prim], rays[i]));
+        t_errors.push_back(distance.kernel_error);
+        row.precise_t_error_max = std::max(row.precise_t_error_max, distance.precise_error);
+        const Vec3 p = rays[i].org + hit.t * rays[i].dir;  // as the renderer computes it
+        const glm::dvec3 p_exact = glm::dvec3(rays[i].org) + distance.exact * glm::dvec3(rays[i].dir);
         row.point_error_ulps = std::max(row.point_error_ulps, max_abs_difference(p, p_exact) / ulp_at(p_exact));
     }
     if (!t_errors.empty()) {
@@ -130,26 +169,125 @@ AccuracyRow measure_case(const AccuracyOptions& o, const AccuracyCase& c, const 
     return row;
 }
 
-void print_table(const std::vector<AccuracyRow>& rows) {
-    std::printf("\n%10s %10s %-16s %10s %9s %12s %12s %12s %9s\n", "radius", "offset", "kernel", "rays", "leaks/M",
-                "t err med", "t err max", "point ulps", "ns/ray");
-    for (const AccuracyRow& r : rows)
-        std::printf("%10.0e %10.0e %-16s %10llu %9.1f %12.2e %12.2e %12.2f %9.1f\n", r.where.scale, r.where.offset,
-                    r.mode.c_str(), (unsigned long long)r.rays, r.leaks_per_million(), r.t_error_median, r.t_error_max,
-                    r.point_error_ulps, r.ns_per_ray);
-    std::printf("t err: |t - t_exact| / t_exact against double precision; point ulps: max |o + t d - p_exact| per axis in floats spaced at the point's largest coordinate\n");
+// Origins uniform in the box, directions uniform on the sphere (engine/random_ray_sample.cpp's rays).
+std::vector<Ray> random_rays(const BBox& box, size_t count, uint64_t seed) {
+    std::mt19937_64 rng(seed);
+    std::uniform_real_distribution<float> unit(0.0f, 1.0f);
+    std::vector<Ray> rays(count);
+    for (Ray& ray : rays) {
+        const Vec3 s(unit(rng), unit(rng), unit(rng));
+        const float z = 2.0f * unit(rng) - 1.0f, phi = 2.0f * std::numbers::pi_v<float> * unit(rng);
+        const float r = std::sqrt(std::max(0.0f, 1.0f - z * z));
+        ray.org = box.lower + s * (box.upper - box.lower);
+        ray.dir = Vec3(r * std::cos(phi), r * std::sin(phi), z);
+    }
+    return rays;
 }
 
-void write_json(const std::vector<AccuracyRow>& rows, const std::string& path) {
+struct PreciseDistances {
+    std::vector<double> t;  // a ray's precise_t, NaN for a miss
+    double ns_per_hit = 0;
+};
+
+// precise_t of every hit, in ray order on one thread, its time the fastest of kRounds passes (single passes on a
+// shared machine varied widely, docs/results.md#precise-distances-for-short-hits): its cost where the API would call
+// it, the hit triangle's corners fetched from the scene's array.
+PreciseDistances precise_distances(const std::vector<Ray>& rays, const std::vector<Hit>& hits,
+                                   const std::vector<Triangle>& tris) {
+    constexpr int kRounds = 5;
+    PreciseDistances precise{std::vector<double>(rays.size(), std::numeric_limits<double>::quiet_NaN())};
+    const size_t count = size_t(std::count_if(hits.begin(), hits.end(), [](const Hit& hit) { return hit.found(); }));
+    double fastest = std::numeric_limits<double>::infinity();
+    for (int round = 0; round < kRounds; ++round) {
+        const auto start = std::chrono::steady_clock::now();
+        for (size_t i = 0; i < rays.size(); ++i)
+            if (hits[i].found()) precise.t[i] = precise_t(tris[hits[i].prim], rays[i]);
+        fastest = std::min(fastest, std::chrono::duration<double, std::nano>(std::chrono::steady_clock::now() - start).count());
+    }
+    precise.ns_per_hit = count ? fastest / double(count) : 0.0;
+    return precise;
+}
+
+SceneAccuracyRow measure_scene_mode(const AccuracyOptions& o, const std::string& scene, const Mode& mode,
+                                    const FlatScene& flat, const std::vector<Ray>& rays) {
+    const TracedRays traced = trace_all(o, mode, flat, rays);
+    SceneAccuracyRow row{scene, traced.kernel, rays.size()};
+    row.short_limit = 0.01 * double(glm::length(flat.bounds.extent()));
+    row.ns_per_ray = traced.ns_per_ray;
+    const PreciseDistances precise_ts = precise_distances(rays, traced.hits, flat.triangles);
+    row.precise_ns_per_hit = precise_ts.ns_per_hit;
+    std::vector<double> kernel, precise, short_kernel, short_precise;
+    for (size_t i = 0; i < rays.size(); ++i) {
+        const Hit& hit = traced.hits[i];
+        if (!hit.found()) continue;
+        const HitDistance distance = hit_distance(rays[i], hit, flat.triangles[hit.prim], precise_ts.t[i]);
+        kernel.push_back(distance.kernel_error), precise.push_back(distance.precise_error);
+        if (distance.exact < row.short_limit)
+            short_kernel.push_back(distance.kernel_error), short_precise.push_back(distance.precise_error);
+    }
+    row.hits = kernel.size();
+    row.kernel = relative_errors(std::move(kernel)), row.precise = relative_errors(std::move(precise));
+    row.short_kernel = relative_errors(std::move(short_kernel)), row.short_precise = relative_errors(std::move(short_precise));
+    return row;
+}
+
+void print_table(const std::vector<AccuracyRow>& rows) {
+    std::printf("\n%10s %10s %-16s %10s %9s %12s %12s %12s %12s %9s\n", "radius", "offset", "kernel", "rays", "leaks/M",
+                "t err med", "t err max", "precise max", "point ulps", "ns/ray");
+    for (const AccuracyRow& r : rows)
+        std::printf("%10.0e %10.0e %-16s %10llu %9.1f %12.2e %12.2e %12.2e %12.2f %9.1f\n", r.where.scale, r.where.offset,
+                    r.mode.c_str(), (unsigned long long)r.rays, r.leaks_per_million(), r.t_error_median, r.t_error_max,
+                    r.precise_t_error_max, r.point_error_ulps, r.ns_per_ray);
+    std::printf("t err: |t - t_exact| / t_exact against long double on the hit triangle; precise: precise_t's "
+                "(kernels/precise_distance.h), rounded to float; point ulps: max |o + t d - p_exact| per axis in floats spaced at the point's largest coordinate\n");
+}
+
+void print_scene_table(const std::vector<SceneAccuracyRow>& rows) {
+    std::printf("\n%-16s %-10s %9s %9s %10s %11s %11s %11s %13s %13s %13s %11s %13s %9s %10s\n", "scene", "kernel",
+                "rays", "hits", "short hits", "t p99", "t p99.9", "t max", "precise p99", "precise p99.9", "precise max",
+                "all t p99.9", "all precise", "ns/ray", "precise ns");
+    for (const SceneAccuracyRow& r : rows)
+        std::printf("%-16s %-10s %9llu %9llu %10llu %11.2e %11.2e %11.2e %13.2e %13.2e %13.2e %11.2e %13.2e %9.1f %10.1f\n",
+                    r.scene.c_str(), r.mode.c_str(), (unsigned long long)r.rays, (unsigned long long)r.hits,
+                    (unsigned long long)r.short_kernel.hits, r.short_kernel.p99, r.short_kernel.p999, r.short_kernel.max,
+                    r.short_precise.p99, r.short_precise.p999, r.short_precise.max, r.kernel.p999, r.precise.p999,
+                    r.ns_per_ray, r.precise_ns_per_hit);
+    std::printf("random rays (origins uniform in the scene's box, directions uniform); |t - t_exact| / t_exact against "
+                "long double on the hit triangle over short hits (exact t under 1%% of the scene's diagonal): the "
+                "kernel's t, and precise_t's (kernels/precise_distance.h) rounded to float; all: p99.9 over every hit; "
+                "precise ns: a call, one thread\n");
+}
+
+nlohmann::json to_json(const RelativeErrors& e) {
+    return {{"hits", e.hits}, {"p99", e.p99}, {"p999", e.p999}, {"max", e.max}};
+}
+
+void write_json(const nlohmann::json& out, const std::string& path) {
+    std::ofstream file(path);
+    file << out.dump(2) << "\n";
+    if (!file) throw std::runtime_error(path + ": cannot write accuracy JSON");
+}
+
+nlohmann::json rows_json(const std::vector<AccuracyRow>& rows) {
     nlohmann::json out = nlohmann::json::array();
     for (const AccuracyRow& r : rows)
         out.push_back({{"radius", r.where.scale}, {"offset", r.where.offset}, {"kernel", r.mode}, {"rays", r.rays},
                        {"leaks", r.leaks}, {"leaks_per_million", r.leaks_per_million()},
                        {"t_error_median", r.t_error_median}, {"t_error_max", r.t_error_max},
-                       {"point_error_ulps", r.point_error_ulps}, {"ns_per_ray", r.ns_per_ray}});
-    std::ofstream file(path);
-    file << out.dump(2) << "\n";
-    if (!file) throw std::runtime_error(path + ": cannot write accuracy JSON");
+                       {"precise_t_error_max", r.precise_t_error_max}, {"point_error_ulps", r.point_error_ulps},
+                       {"ns_per_ray", r.ns_per_ray}});
+    return out;
+}
+
+nlohmann::json rows_json(const std::vector<SceneAccuracyRow>& rows) {
+    nlohmann::json out = nlohmann::json::array();
+    for (const SceneAccuracyRow& r : rows)
+        out.push_back({{"scene", r.scene}, {"kernel", r.mode}, {"rays", r.rays}, {"hits", r.hits},
+                       {"short_limit", r.short_limit}, {"t_error", to_json(r.kernel)},
+                       {"precise_t_error", to_json(r.precise)}, {"short_t_error", to_json(r.short_kernel)},
+                       {"short_precise_t_error", to_json(r.short_precise)}, {"ns_per_ray", r.ns_per_ray},
+                       {"precise_ns_per_hit", r.precise_ns_per_hit}});
+    return out;
 }
 
 // Maximum relative distance error against the largest coordinate of the scene, a curve per intersector and
@@ -189,10 +327,30 @@ std::vector<AccuracyRow> measure_accuracy(const AccuracyOptions& o, const std::v
     return rows;
 }
 
+std::vector<SceneAccuracyRow> measure_scene_accuracy(const AccuracyOptions& o, const std::string& scene) {
+    const Scene loaded = load_scene(scene);
+    const FlatScene flat = flatten(loaded);
+    const std::vector<Ray> rays = random_rays(flat.bounds, o.rays, 1234);
+    std::vector<SceneAccuracyRow> rows;
+    for (const Mode mode : {Mode{true, true}, Mode{true, false}})
+        rows.push_back(measure_scene_mode(o, loaded.name, mode, flat, rays));
+    return rows;
+}
+
 void run_accuracy(const AccuracyOptions& o) {
+    if (!o.scenes.empty()) {
+        std::vector<SceneAccuracyRow> rows;
+        for (const std::string& scene : o.scenes) {
+            const std::vector<SceneAccuracyRow> more = measure_scene_accuracy(o, scene);
+            rows.insert(rows.end(), more.begin(), more.end());
+        }
+        print_scene_table(rows);
+        if (!o.json_path.empty()) write_json(rows_json(rows), o.json_path), std::printf("wrote %s\n", o.json_path.c_str());
+        return;
+    }
     const std::vector<AccuracyRow> rows = measure_accuracy(o, accuracy_cases());
     print_table(rows);
-    if (!o.json_path.empty()) write_json(rows, o.json_path), std::printf("wrote %s\n", o.json_path.c_str());
+    if (!o.json_path.empty()) write_json(rows_json(rows), o.json_path), std::printf("wrote %s\n", o.json_path.c_str());
     if (!o.plot_path.empty()) write_plot(rows, o.plot_path), std::printf("wrote %s\n", o.plot_path.c_str());
 }
 
@@ -211,9 +369,13 @@ void register_accuracy(CLI::App& canopy) {
         })
         ->capture_default_str();
     accuracy->add_option("--kernel", ac.kernel, "Kernel: auto (widest), bvh2, bvh4, bvh8")->capture_default_str();
-    accuracy->add_option("--rays", ac.rays, "Rays per case and mode")->check(CLI::Range(1, 100000000))->capture_default_str();
+    accuracy->add_option("--rays", ac.rays, "Rays per case (or scene) and mode")->check(CLI::Range(1, 100000000))->capture_default_str();
+    CLI::Option* scenes = accuracy->add_option("scene", ac.scenes,
+        "Scenes (scene.json, .obj, .gltf, .glb or gen:NAME?tris=N&seed=S): random rays through each, the short hits' "
+        "distance errors, instead of the sphere sweep");
     accuracy->add_option("--json", ac.json_path, "Write the rows as JSON");
-    accuracy->add_option("--plot", ac.plot_path, "Write a PNG: distance error against coordinate magnitude");
+    accuracy->add_option("--plot", ac.plot_path, "Write a PNG: distance error against coordinate magnitude (the sphere sweep)")
+        ->excludes(scenes);
     accuracy->add_option("--threads", p->threads, "Threads (0: all)")->check(CLI::Range(0, 4096));
     accuracy->callback([p] {
         if (!distributed::is_root()) return;  // not split: under a job, rank 0's alone

@@ -1,7 +1,8 @@
 #pragma once
 // Numerical accuracy, measured: rays shot from inside closed spheres at their vertices and shared edges (where a
 // non-watertight test leaks) and at random, as the sphere is scaled from 1e-6 to 1e6 and moved out to 1e7, for every
-// intersector and traversal mode. Leaks per million rays, hit-distance error against a double-precision oracle.
+// intersector and traversal mode. Leaks per million rays, hit-distance error against an extended-precision oracle.
+// On scene files, random rays: the hit-distance error of short hits, the kernel's t against precise_t's.
 #include "base/geometry.h"
 #include "kernels/ray.h"
 #include "experiments/command.h"
@@ -33,10 +34,30 @@ struct AccuracyRow {
     uint64_t rays = 0;
     uint64_t leaks = 0;      // rays from inside that found no hit
     double t_error_median = 0, t_error_max = 0;  // |t - t_exact| / t_exact over hits
+    double precise_t_error_max = 0;  // the same for precise_t (kernels/precise_distance.h)
     double point_error_ulps = 0;  // max per-axis |o + t d - p_exact| in float spacings at the point's largest coordinate
     double ns_per_ray = 0;   // one query through the accelerator's trace() in parallel, call overhead included
 
     double leaks_per_million() const { return rays ? 1e6 * double(leaks) / double(rays) : 0.0; }
+};
+
+// Relative hit-distance errors |t - t_exact| / t_exact over a set of hits.
+struct RelativeErrors {
+    uint64_t hits = 0;
+    double p99 = 0, p999 = 0, max = 0;
+};
+
+// A scene file's random rays (origins uniform in its box, directions uniform on the sphere: a distance query's rays)
+// through one intersector, robust traversal.
+struct SceneAccuracyRow {
+    std::string scene;
+    std::string mode;            // kernel, e.g. "bvh8", "bvh8 mt"
+    uint64_t rays = 0, hits = 0;
+    double short_limit = 0;      // 1% of the scene's diagonal
+    RelativeErrors kernel, precise;              // every hit: the kernel's t, precise_t
+    RelativeErrors short_kernel, short_precise;  // hits whose exact t is under short_limit
+    double ns_per_ray = 0;       // as AccuracyRow's
+    double precise_ns_per_hit = 0;  // precise_t over the hits in ray order, one thread
 };
 
 struct AccuracyOptions {
@@ -44,6 +65,7 @@ struct AccuracyOptions {
     std::string kernel = "auto";
     size_t rays = 200000;       // per case and mode
     int sphere_levels = 5;      // 8192 triangles
+    std::vector<std::string> scenes;  // measured instead of the sphere sweep when given
     std::string json_path, plot_path;
 };
 
@@ -53,7 +75,10 @@ std::vector<AccuracyCase> accuracy_cases();
 // Every case under every combination of watertight/Möller–Trumbore and robust/fast traversal.
 std::vector<AccuracyRow> measure_accuracy(const AccuracyOptions& options, const std::vector<AccuracyCase>& cases);
 
-// Measures every case, prints the table, writes JSON and the plot when asked.
+// `options.rays` random rays through the scene under the watertight and the Möller–Trumbore intersector.
+std::vector<SceneAccuracyRow> measure_scene_accuracy(const AccuracyOptions& options, const std::string& scene);
+
+// Measures every case, or every scene when given; prints the table, writes JSON and the plot when asked.
 void run_accuracy(const AccuracyOptions& options);
 // `canopy accuracy`, its options and its run.
 void register_accuracy(CLI::App& canopy);

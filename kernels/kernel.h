@@ -29,6 +29,8 @@ struct NoScratch {
 template <class Layout, bool Robust, class TriangleTest>
 struct BvhKernel {
     static constexpr int kWidth = Layout::kWidth;
+    static constexpr bool kRobust = Robust;
+    using Test = TriangleTest;
     static constexpr bool kBatches = has_batch_kernels<Layout>;
     static constexpr bool kStreams = kBatches;  // the stream tracer wants packets: a compressed tree has none
     using Scratch = std::conditional_t<kBatches, StreamScratch<kWidth>, NoScratch>;

@@ -8,6 +8,7 @@ cd "$(dirname "$0")/.."
 packages=(cmake ninja-build g++ libtbb-dev libopenimageio-dev openimageio-tools libopenexr-dev libglm-dev
           libtinyobjloader-dev libtinygltf-dev catch2 nlohmann-json3-dev libcli11-dev libembree-dev fonts-dejavu-core
           python3-dev pybind11-dev python3-numpy python3-pytest   # the Python module, for /usr/bin/python3
+          python3-build python3-venv python3-pip python3-setuptools python3-wheel   # its wheel and pip install .
           libopenmpi-dev openmpi-bin                               # jobs of several processes (mpirun, srun)
           curl xz-utils   # scripts/sanitizers.sh tsan fetches and unpacks oneTBB's source
           ccache)         # a fresh clone reuses the objects of earlier builds (CMakeLists.txt)

@@ -5,7 +5,9 @@
 
 #include <catch2/catch.hpp>
 
+#include <algorithm>
 #include <bit>
+#include <memory>
 #include <cmath>
 #include <random>
 
@@ -47,6 +49,10 @@ bool same_bits(const canopy::RayHit& a, const canopy::RayHit& b) {
 }
 
 canopy::MeshArrays arrays(const canopy::TriangleMesh& mesh) { return {mesh.vertices, mesh.triangles}; }
+
+// The cube [-1, 1]^3 as 12 triangles, outward: a closed mesh with a known distance function.
+const canopy::TriangleMesh kCube{{-1, -1, -1, 1, -1, -1, 1, 1, -1, -1, 1, -1, -1, -1, 1, 1, -1, 1, 1, 1, 1, -1, 1, 1},
+                                 {0, 2, 1, 0, 3, 2, 4, 5, 6, 4, 6, 7, 0, 1, 5, 0, 5, 4, 3, 7, 6, 3, 6, 2, 0, 4, 7, 0, 7, 3, 1, 2, 6, 1, 6, 5}};
 
 // Requires two trees of one mesh to find every ray's hit at the same distance, bit for bit (the triangle may differ
 // at ties); returns how many rays hit.
@@ -165,7 +171,8 @@ TEST_CASE("api: instances report their index and their mesh's triangle, at the w
 
 TEST_CASE("api: stats name the builder auto chose, and EPO only when asked", "[api]") {
     const canopy::TriangleMesh mesh = canopy::load_triangles("gen:box?tris=2000");
-    const canopy::AccelStats chosen = canopy::Accel(arrays(mesh)).stats();
+    REQUIRE(canopy::Accel(arrays(mesh)).stats().builder == "binned");  // the plain build by default
+    const canopy::AccelStats chosen = canopy::Accel(arrays(mesh), {.builder = "auto"}).stats();
     // "rebraid/binned", "bittner<lbvh": a top level before the builder, an optimiser's start tree after it.
     const size_t slash = chosen.builder.find('/');
     const std::string builder = chosen.builder.substr(slash == std::string::npos ? 0 : slash + 1);
@@ -213,7 +220,7 @@ TEST_CASE("api: bad input throws std::invalid_argument naming the argument", "[a
     REQUIRE_THROWS_WITH(build(vertices, triangles, {.builder = "binned", .toplevel = "x"}), Contains("toplevel: unknown 'x'"));
     REQUIRE_THROWS_WITH(build(vertices, triangles, {.threads = -2}), Contains("threads: -2"));
     REQUIRE_THROWS_WITH(build(vertices, triangles, {.builder = "binned", .layout = "tiny"}), Contains("layout: unknown layout 'tiny'"));
-    REQUIRE_THROWS_WITH(build(vertices, triangles, {.layout = "compressed"}), Contains("layout: compressed nodes take a named BVH builder, kernel bvh8 and a flat top level, not builder 'auto'"));
+    REQUIRE_THROWS_WITH(build(vertices, triangles, {.builder = "auto", .layout = "compressed"}), Contains("layout: compressed nodes take a named BVH builder, kernel bvh8 and a flat top level, not builder 'auto'"));
     REQUIRE_THROWS_WITH(build(vertices, triangles, {.builder = "lbvh", .collapse = "zigzag"}), Contains("collapse: unknown collapse 'zigzag'"));
     REQUIRE_THROWS_WITH(build(vertices, triangles, {.builder = "binned", .layout = "compressed", .collapse = "direct"}),
                         Contains("collapse: collapse 'direct' is lbvh's wide tree"));
@@ -241,5 +248,152 @@ TEST_CASE("api: bad input throws std::invalid_argument naming the argument", "[a
     REQUIRE_THROWS_WITH(accel.intersect({two, down, {}, {}}, {.u = std::span(t).first(1)}), Contains("hits.u: 1 values for 2 rays"));
     REQUIRE_THROWS_WITH(accel.intersect({0, 0, 1}, {0, INFINITY, -1}), Contains("directions[0]: y is inf"));
     REQUIRE_THROWS_WITH(accel.occluded({0, 0, 1}, {0, 0, -1}, NAN), Contains("tmin: nan"));
+    REQUIRE_THROWS_WITH(accel.occluded({0, 0, 1}, {0, 0, -1}, -1.0f), Contains("tmin: -1.000000 is negative"));
+    const std::vector<float> points{0, 0, 0, NAN, 0, 0};
+    std::vector<float> distance(2);
+    REQUIRE_THROWS_WITH(accel.closest_points(points, {.distance = distance}), Contains("points[1]: x is nan"));
+    REQUIRE_THROWS_WITH(accel.closest_points(std::span(points).first(4), {}), Contains("points: 4 values"));
     REQUIRE_THROWS_WITH(canopy::load_triangles("no-such-file.obj"), Contains("no-such-file.obj"));
+}
+
+TEST_CASE("api: a ray with a non-finite value misses when the batch asks for it, the others hit as alone", "[api]") {
+    const canopy::TriangleMesh mesh = canopy::load_triangles("gen:box?tris=500");
+    const canopy::Accel accel(arrays(mesh));
+    const std::vector<float> origins{0, 0, 0, NAN, 0, 0, 0, 0, 0}, directions{1, 0.1f, 0.2f, 1, 0, 0, -1, 0.3f, 0.1f};
+    std::vector<float> t(3);
+    std::vector<uint32_t> triangle(3);
+    canopy::RayBatch batch{origins, directions, {}, {}, true};
+    accel.intersect(batch, {.t = t, .triangle = triangle});
+    REQUIRE(triangle[1] == canopy::kNoHit);
+    REQUIRE(std::isinf(t[1]));
+    REQUIRE(t[0] == accel.intersect({0, 0, 0}, {1, 0.1f, 0.2f}).t);
+    REQUIRE(t[2] == accel.intersect({0, 0, 0}, {-1, 0.3f, 0.1f}).t);
+    REQUIRE(triangle[0] != canopy::kNoHit);
+    batch.invalid_rays_miss = false;
+    REQUIRE_THROWS_WITH(accel.intersect(batch, {.t = t}), Catch::Contains("origins[1]: x is nan"));
+}
+
+TEST_CASE("api: t is precise on short hits at any scale, and a surface through the origin is not hit", "[api][extreme]") {
+    // One big tilted triangle; origins at relative distances 1e-7 to 1e-1 of its size above random points of it.
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<double> unit(0.0, 1.0);
+    for (const float scale : {1e-3f, 1.0f, 1e4f}) {
+        const std::vector<float> vertices{-1 * scale, -1 * scale, 0.3f * scale, 2 * scale, -0.5f * scale, -0.2f * scale, 0, 2 * scale, 0.1f * scale};
+        const std::vector<uint32_t> triangles{0, 1, 2};
+        const canopy::Accel accel({vertices, triangles});
+        double worst = 0;
+        for (int i = 0; i < 2000; ++i) {
+            const double a = 0.1 + unit(rng) * 0.3, b = 0.1 + unit(rng) * 0.3, height = std::pow(10.0, -7.0 + 6.0 * unit(rng)) * scale;
+            const auto corner = [&](int k, int axis) { return double(vertices[3 * k + axis]); };
+            std::array<double, 3> target, normal;
+            for (int axis = 0; axis < 3; ++axis)
+                target[axis] = corner(0, axis) + a * (corner(1, axis) - corner(0, axis)) + b * (corner(2, axis) - corner(0, axis));
+            const auto edge = [&](int k, int axis) { return corner(k, axis) - corner(0, axis); };
+            normal = {edge(1, 1) * edge(2, 2) - edge(1, 2) * edge(2, 1), edge(1, 2) * edge(2, 0) - edge(1, 0) * edge(2, 2),
+                      edge(1, 0) * edge(2, 1) - edge(1, 1) * edge(2, 0)};
+            const double length = std::sqrt(normal[0] * normal[0] + normal[1] * normal[1] + normal[2] * normal[2]);
+            const std::array<float, 3> origin{float(target[0] + height * normal[0] / length), float(target[1] + height * normal[1] / length),
+                                              float(target[2] + height * normal[2] / length)};
+            const std::array<float, 3> direction{float(-normal[0] / length + 0.1 * (unit(rng) - 0.5)), float(-normal[1] / length),
+                                                 float(-normal[2] / length)};
+            const canopy::RayHit hit = accel.intersect(origin, direction);
+            REQUIRE(hit.found());
+            // The exact distance from the float origin and direction, in long double.
+            long double n_dot_d = 0, n_dot_w = 0;
+            for (int axis = 0; axis < 3; ++axis) {
+                const long double n = (long double)(edge(1, (axis + 1) % 3)) * edge(2, (axis + 2) % 3) -
+                                      (long double)(edge(1, (axis + 2) % 3)) * edge(2, (axis + 1) % 3);
+                n_dot_d += n * direction[axis];
+                n_dot_w += n * ((long double)(corner(0, axis)) - origin[axis]);
+            }
+            const long double exact = n_dot_w / n_dot_d;
+            worst = std::max(worst, double(std::abs((hit.t - exact) / exact)));
+        }
+        INFO("scale " << scale);
+        CHECK(worst <= 2.0 * 0x1p-24);  // the float rounding of the exact distance, and the inputs' exactness
+    }
+    // Origins exactly on surfaces: every corner and edge midpoint of a closed cube's triangles, rays both ways.
+    const canopy::Accel cube(arrays(kCube));
+    size_t hits = 0;
+    for (size_t k = 0; k < kCube.triangles.size(); ++k) {
+        const float* v0 = &kCube.vertices[3 * kCube.triangles[k]];
+        const float* v1 = &kCube.vertices[3 * kCube.triangles[k % 3 == 2 ? k - 2 : k + 1]];
+        const std::array<float, 3> corner{v0[0], v0[1], v0[2]}, midpoint{0.5f * (v0[0] + v1[0]), 0.5f * (v0[1] + v1[1]), 0.5f * (v0[2] + v1[2])};
+        for (const std::array<float, 3>& origin : {corner, midpoint})
+            for (const float sign : {1.0f, -1.0f}) {
+                const canopy::RayHit hit = cube.intersect(origin, {sign * (0.3f - origin[0]), sign * (0.2f - origin[1]), sign * (0.1f - origin[2])});
+                REQUIRE((!hit.found() || hit.t > 0.5f));  // the far side of the cube, never the surface at the origin
+                hits += hit.found();
+            }
+    }
+    CHECK(hits >= kCube.triangles.size());
+}
+
+TEST_CASE("api: every hit along a ray, in order, each triangle once, the closest hit first", "[api]") {
+    const canopy::TriangleMesh mesh = canopy::load_triangles("gen:box?tris=3000&seed=4");
+    for (const char* kernel : {"bvh2", "bvh4", "bvh8"}) {
+        const canopy::Accel accel(arrays(mesh), {.kernel = kernel});
+        const Rays rays = random_rays(20000, 5);  // many chunks of a batch
+        canopy::HitList list;
+        accel.intersect_all(rays.batch(), list);
+        std::vector<uint32_t> counts(rays.count());
+        accel.count_hits(rays.batch(), counts);
+        const std::vector<canopy::RayHit> closest = batch_hits(accel, rays);
+        REQUIRE(list.offsets.size() == rays.count() + 1);
+        size_t several = 0;
+        for (size_t i = 0; i < rays.count(); ++i) {
+            const size_t first = list.offsets[i], end = list.offsets[i + 1];
+            REQUIRE(counts[i] == end - first);
+            REQUIRE(closest[i].found() == (end > first));
+            if (end == first) continue;
+            REQUIRE(list.t[first] == closest[i].t);
+            std::vector<uint32_t> seen;
+            for (size_t k = first; k < end; ++k) {
+                if (k > first) REQUIRE(list.t[k] >= list.t[k - 1]);
+                seen.push_back(list.triangle[k]);
+            }
+            std::sort(seen.begin(), seen.end());
+            REQUIRE(std::adjacent_find(seen.begin(), seen.end()) == seen.end());
+            several += end - first > 1;
+        }
+        CHECK(several > rays.count() / 10);
+    }
+}
+
+TEST_CASE("api: closest points and inside tests on a closed box match its distance function", "[api]") {
+    for (const char* kernel : {"bvh2", "bvh4", "bvh8"}) {
+        const canopy::Accel accel(arrays(kCube), {.kernel = kernel});
+        std::mt19937 rng(9);
+        std::uniform_real_distribution<float> uniform(-3.0f, 3.0f);
+        std::vector<float> points(3 * 5000);
+        for (float& x : points) x = uniform(rng);
+        const size_t n = points.size() / 3;
+        std::vector<float> nearest(3 * n), distance(n);
+        std::vector<uint32_t> triangle(n);
+        std::unique_ptr<bool[]> inside(new bool[n]);
+        accel.closest_points(points, {.point = nearest, .distance = distance, .triangle = triangle});
+        accel.contains(points, {inside.get(), n});
+        for (size_t i = 0; i < n; ++i) {
+            const float x = points[3 * i], y = points[3 * i + 1], z = points[3 * i + 2];
+            const float outside = std::hypot(std::max(std::abs(x) - 1, 0.0f), std::max(std::abs(y) - 1, 0.0f), std::max(std::abs(z) - 1, 0.0f));
+            const bool in = std::max({std::abs(x), std::abs(y), std::abs(z)}) < 1;
+            const float expected = in ? 1 - std::max({std::abs(x), std::abs(y), std::abs(z)}) : outside;
+            INFO(kernel << " point " << x << " " << y << " " << z);
+            REQUIRE(std::abs(distance[i] - expected) <= 1e-6f);
+            REQUIRE(inside[i] == in);
+            REQUIRE(triangle[i] < 12);
+            REQUIRE(std::max({std::abs(nearest[3 * i]), std::abs(nearest[3 * i + 1]), std::abs(nearest[3 * i + 2])}) == Approx(1.0f));
+        }
+    }
+}
+
+TEST_CASE("api: ray lists and point queries need a flat tree of standard nodes", "[api]") {
+    const canopy::TriangleMesh mesh = canopy::load_triangles("gen:box?tris=100");
+    const std::vector<canopy::MeshArrays> meshes{arrays(mesh)};
+    const canopy::Accel two_level(meshes, {}, {.toplevel = "two-level"});
+    const std::vector<float> point{0, 0, 0};
+    std::vector<float> distance(1);
+    REQUIRE_THROWS_WITH(two_level.closest_points(point, {.distance = distance}), Catch::Contains("closest_points: needs a flat tree"));
+    canopy::HitList list;
+    REQUIRE_THROWS_WITH(two_level.intersect_all({point, point, {}, {}}, list), Catch::Contains("intersect_all: needs a flat tree"));
 }

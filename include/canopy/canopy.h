@@ -33,9 +33,10 @@ struct MeshInstance {
 };
 
 struct AccelOptions {
-    // A name of registered_builders(), or "auto": candidates built and timed on a sample of 16 planned frames of the
-    // protocol's path tracer (1024 x 768, 8 bounces, the scene's default camera), the least time to image kept.
-    std::string builder = "auto";
+    // A name of registered_builders() (binned: the plain SAH build), or "auto": candidates built and timed on a
+    // sample of 16 planned frames of the protocol's path tracer (1024 x 768, 8 bounces, the scene's default camera),
+    // the least time to image kept.
+    std::string builder = "binned";
     std::string kernel = "auto";   // "bvh2", "bvh4", "bvh8", or "auto": the widest this build and CPU run
     bool robust = true;            // traversal that never misses a box the ray touches; false: the fast mode
     bool watertight = true;        // no ray slips between triangles sharing an edge; false: Möller–Trumbore
@@ -64,12 +65,17 @@ struct RayHit {
 };
 
 // A batch of rays as views of the caller's arrays. tmin and tmax hold one value a ray, or one for every ray, or
-// nothing (0 and infinity); a ray finds hits in (tmin, tmax].
+// nothing (0 and infinity); a ray finds hits in (tmin, tmax], tmin >= 0. t is a hit's distance to double precision
+// on its triangle, rounded to float, so short hits keep their relative precision; a surface through the origin
+// (t = 0) is never hit.
 struct RayBatch {
     std::span<const float> origins;     // x, y, z a ray
     std::span<const float> directions;  // x, y, z a ray; need not be unit length
     std::span<const float> tmin;
     std::span<const float> tmax;
+    // A ray with a non-finite origin or direction or a NaN tmin or tmax: false, the query throws naming it; true,
+    // it answers as a miss (what batch pipelines expect of one bad row). A negative tmin always throws.
+    bool invalid_rays_miss = false;
 };
 
 // Where a batch's closest hits go: each view holds one value a ray, or is empty when not wanted. Misses get t
@@ -79,6 +85,26 @@ struct HitBatch {
     std::span<uint32_t> triangle;
     std::span<float> u, v;
     std::span<uint32_t> instance;
+    std::span<float> normal;  // x, y, z a ray: the hit triangle's unit geometric normal (v1 - v0) x (v2 - v0) in the
+                              // world, zeros for a miss
+};
+
+// Every hit along each ray of a batch: ray i's hits are entries [offsets[i], offsets[i + 1]), ordered by t (then by
+// instance and triangle), each triangle once.
+struct HitList {
+    std::vector<uint64_t> offsets;  // one more than the rays
+    std::vector<float> t, u, v;
+    std::vector<uint32_t> triangle, instance;
+};
+
+// Where a batch of closest-point queries goes: each view holds one value a point (point: three), or is empty when
+// not wanted. A point that finds nothing (no triangles, or a non-finite point answered as a miss) gets distance
+// infinity, point NaN, triangle and instance kNoHit.
+struct PointBatch {
+    std::span<float> point;  // x, y, z a query: the nearest point on the surface
+    std::span<float> distance;
+    std::span<uint32_t> triangle, instance;
+    std::span<float> u, v;  // barycentric weights of the triangle's second and third vertex at that point
 };
 
 struct AccelStats {
@@ -132,7 +158,25 @@ public:
     void intersect(const RayBatch& rays, const HitBatch& hits) const;
     void occluded(const RayBatch& rays, std::span<bool> occluded) const;
 
+    // Every hit along each ray, or their number, a triangle hit on a shared edge counted once a triangle. Need a
+    // flat tree of standard nodes (toplevel "flat", layout "standard", not builder "kdtree"): std::invalid_argument
+    // otherwise, as for the point queries below.
+    void intersect_all(const RayBatch& rays, HitList& hits) const;
+    void count_hits(const RayBatch& rays, std::span<uint32_t> counts) const;
+
+    // The nearest surface point of each point (x, y, z a query), through the tree: points must be finite, unless
+    // invalid_points_miss, when a non-finite point answers as a miss.
+    void closest_points(std::span<const float> points, const PointBatch& out, bool invalid_points_miss = false) const;
+    // Whether each point lies inside the surface, by the parity of a ray's crossings, the majority of three rays
+    // of fixed directions (one alone errs where it grazes an edge). Meant for closed meshes; a non-finite point is
+    // outside with invalid_points_miss, otherwise it throws.
+    void contains(std::span<const float> points, std::span<bool> inside, bool invalid_points_miss = false) const;
+
     AccelStats stats(bool with_epo = false) const;
+
+    // Throws what a query of this batch would throw for its arrays and rays (for callers that answer a batch
+    // without an accelerator, such as a scene of no triangles).
+    static void check_rays(const RayBatch& rays);
 
 private:
     struct Impl;

@@ -223,7 +223,8 @@ def test_stats(scene):
     assert stats["nodes"] > 0 and stats["leaves"] > 0 and stats["bytes"] > 0
     assert stats["references_per_triangle"] >= 1 and stats["epo"] is None
     assert canopy.Accel(vertices, triangles, builder="binned").stats(epo=True)["epo"] > 0
-    chosen = canopy.Accel(vertices, triangles).stats()
+    assert canopy.Accel(vertices, triangles).stats()["builder"] == "binned"  # the plain build by default
+    chosen = canopy.Accel(vertices, triangles, builder="auto").stats()
     # "rebraid/binned", "bittner<lbvh": a top level before the builder, an optimiser's start tree after it.
     assert chosen["builder"].split("/")[-1].split("<")[0] in canopy.builders() and chosen["reason"]
 
@@ -275,7 +276,7 @@ BAD_BUILDS = [
     ({"builder": "nosuch"}, "builder: unknown builder 'nosuch'"),
     ({"kernel": "bvh3"}, "kernel: unknown kernel 'bvh3'"),
     ({"toplevel": "treetop", "builder": "binned"}, "toplevel: unknown 'treetop'"),
-    ({"toplevel": "rebraid"}, "toplevel: builder 'auto' chooses"),
+    ({"toplevel": "rebraid", "builder": "auto"}, "toplevel: builder 'auto' chooses"),
     ({"threads": -1}, "threads: -1"),
     ({"layout": "tiny", "builder": "binned"}, "layout: unknown layout 'tiny'"),
     ({"collapse": "zigzag", "builder": "lbvh"}, "collapse: unknown collapse 'zigzag'"),
@@ -318,7 +319,7 @@ def test_bad_queries_raise_value_errors_naming_the_argument(query, arguments, me
     accel = build()
     call = {"origins": RAYS, "directions": DOWN, **arguments}
     with pytest.raises(ValueError, match=message):
-        getattr(accel, query)(**call)
+        getattr(accel, query)(**call, strict=True)
 
 
 def test_an_empty_batch_returns_empty_arrays(scene):
