@@ -35,6 +35,17 @@ py::array as_array(const py::object& object, const std::string& name) {
     return a;
 }
 
+// `a` as a C-order array of T, in place when it is one, else converted; numpy's ensure returns nothing when it cannot
+// (a copy too large for memory), which raises a ValueError naming the argument.
+template <class T>
+py::array_t<T, py::array::c_style> converted(const py::array& a, const std::string& name) {
+    auto out = py::array_t<T, py::array::c_style | py::array::forcecast>::ensure(a);
+    if (!out)
+        throw py::value_error(name + ": cannot allocate a C-order " + std::string(py::str(py::dtype::of<T>())) + " copy of shape " +
+                              shape_of(a));
+    return out;
+}
+
 enum class Rows { AtLeastOne, AnyNumber };
 
 // `object` as a C-order float32 array of shape (n, 3), or (n, 3, 4) for ndim 3: in place when it is one, else a
@@ -49,14 +60,14 @@ py::array_t<float, py::array::c_style> float_array(const py::object& object, con
     if (kind != 'f' && kind != 'i' && kind != 'u')
         throw py::value_error(name + ": dtype " + std::string(py::str(a.dtype())) + ", expected float32 (or real numbers, converted)");
     if (a.shape(0) == 0 && rows == Rows::AtLeastOne) throw py::value_error(name + ": empty");
-    return py::array_t<float, py::array::c_style | py::array::forcecast>::ensure(a);
+    return converted<float>(a, name);
 }
 
 // Range checks of indices that are not uint32, before the conversion to uint32 would wrap them. Messages as the C++
 // API's, which checks uint32 indices.
 template <class Int>
 void check_indices(const py::array& a, const std::string& name, size_t vertices) {
-    const auto typed = py::array_t<Int, py::array::c_style | py::array::forcecast>::ensure(a);
+    const auto typed = converted<Int>(a, name);
     const Int* data = typed.data();
     for (py::ssize_t i = 0; i < typed.size(); ++i) {
         const std::string index = name + "[" + std::to_string(i / 3) + "]: vertex index " + std::to_string(data[i]);
@@ -84,7 +95,7 @@ py::array index_array(const py::object& object, const std::string& name, size_t 
     }
     if (kind == 'i') check_indices<int64_t>(a, name, vertices);
     else check_indices<uint64_t>(a, name, vertices);
-    return py::array_t<uint32_t, py::array::c_style | py::array::forcecast>::ensure(a);
+    return converted<uint32_t>(a, name);
 }
 
 std::span<const float> floats(const py::array_t<float, py::array::c_style>& a) { return {a.data(), size_t(a.size())}; }
@@ -97,7 +108,7 @@ py::array_t<float, py::array::c_style> interval_ends(const py::object& object, p
         throw py::value_error(name + ": dtype " + std::string(py::str(a.dtype())) + ", expected a number or float32 array");
     if (a.ndim() > 1 || (a.ndim() == 1 && a.shape(0) != rays))
         throw py::value_error(name + ": shape " + shape_of(a) + ", expected a number or (" + std::to_string(rays) + ",)");
-    return py::array_t<float, py::array::c_style | py::array::forcecast>::ensure(a);
+    return converted<float>(a, name);
 }
 
 // Runs f, turning a failed allocation (numpy's MemoryError or std::bad_alloc) into a ValueError naming the
@@ -129,10 +140,7 @@ std::pair<py::array_t<float, py::array::c_style>, std::vector<py::ssize_t>> batc
         throw py::value_error(name + ": dtype " + std::string(py::str(a.dtype())) + ", expected float32 or float64");
     std::vector<py::ssize_t> shape(a.shape(), a.shape() + a.ndim() - 1);
     const py::ssize_t count = a.size() / width;
-    auto converted = allocating(name, count, "rows", [&] {
-        return py::array_t<float, py::array::c_style | py::array::forcecast>::ensure(a).reshape({count, width});
-    });
-    return {py::array_t<float, py::array::c_style>(converted), shape};
+    return {converted<float>(converted<float>(a, name).reshape({count, width}), name), shape};
 }
 
 // tmin or tmax of a batch of shape (...): a number for every ray, or an array of that shape.
@@ -142,13 +150,13 @@ py::array_t<float, py::array::c_style> batch_interval(const py::object& object, 
     const char kind = a.dtype().kind();
     if (kind != 'f' && kind != 'i' && kind != 'u')
         throw py::value_error(name + ": dtype " + std::string(py::str(a.dtype())) + ", expected a number or float32 array");
-    if (a.ndim() == 0) return py::array_t<float, py::array::c_style | py::array::forcecast>::ensure(a);
+    if (a.ndim() == 0) return converted<float>(a, name);
     if (!std::equal(shape.begin(), shape.end(), a.shape(), a.shape() + a.ndim()) || py::ssize_t(shape.size()) != a.ndim()) {
         py::tuple expected(shape.size());
         for (size_t d = 0; d < shape.size(); ++d) expected[d] = shape[d];
         throw py::value_error(name + ": shape " + shape_of(a) + ", expected a number or " + std::string(py::str(expected)));
     }
-    return py::array_t<float, py::array::c_style | py::array::forcecast>::ensure(a.attr("reshape")(-1));
+    return converted<float>(a.attr("reshape")(-1), name);
 }
 
 // A batch's rays as the C++ API takes them, kept alive while its views refer to them: (..., 6) rays split into
@@ -307,7 +315,7 @@ public:
             const auto v = float_array(vertices, "vertices");
             const py::array checked = index_array(t, "triangles", size_t(v.shape(0)));
             check_mesh(v, checked);
-            const auto indices = py::array_t<uint32_t, py::array::c_style | py::array::forcecast>::ensure(checked);
+            const auto indices = converted<uint32_t>(checked, "triangles");
             mesh.vertices.assign(v.data(), v.data() + v.size());
             mesh.triangles.assign(indices.data(), indices.data() + indices.size());
         }

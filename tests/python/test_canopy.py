@@ -330,3 +330,15 @@ def test_an_empty_batch_returns_empty_arrays(scene):
         assert array.shape == (0,) and array.dtype == dtype
     hit = accel.occluded(nothing, nothing, tmax=np.zeros(0, np.float32))
     assert hit.shape == (0,) and hit.dtype == np.bool_
+
+
+@pytest.mark.parametrize("query", ["intersect", "occluded", "count_intersections", "list_intersections"])
+def test_a_batch_too_large_for_memory_raises_a_value_error_naming_the_argument(query):
+    scene = canopy.Scene()
+    scene.add_mesh(GOOD_VERTICES, GOOD_TRIANGLES)
+    rays = np.broadcast_to(np.zeros(6, np.float32), (3_000_000_000, 6))  # 72 GB once made contiguous
+    with pytest.raises(ValueError, match=r"rays: cannot allocate a C-order float32 copy of shape \(3000000000, 6\)"):
+        getattr(scene, query)(rays)
+    origins = np.broadcast_to(np.zeros(3, np.float32), (3_000_000_000, 3))
+    with pytest.raises(ValueError, match="origins: cannot allocate"):
+        build().intersect(origins, origins)
