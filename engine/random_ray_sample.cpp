@@ -19,21 +19,11 @@ constexpr uint32_t kBlock = 64;
 
 class RandomRaySample final : public WorkloadSample {
 public:
-    RandomRaySample(const FlatScene& flat, uint32_t rays, uint64_t seed) : rays_(rays), hits_(rays) {
+    RandomRaySample(const FlatScene& flat, uint32_t rays, uint64_t seed) : hits_(rays) {
         BBox bounds{Vec3(0.0f), Vec3(0.0f)};
         if (!flat.triangles.empty()) bounds = BBox::of(flat.triangles[0]);
         for (const Triangle& t : flat.triangles) bounds.extend(BBox::of(t));
-        std::mt19937_64 rng(seed);
-        std::uniform_real_distribution<float> unit(0.0f, 1.0f);
-        for (Ray& ray : rays_) {
-            const Vec3 t(unit(rng), unit(rng), unit(rng));
-            const float z = 2.0f * unit(rng) - 1.0f, phi = 2.0f * std::numbers::pi_v<float> * unit(rng);
-            const float r = std::sqrt(std::max(0.0f, 1.0f - z * z));
-            ray.org = bounds.lower + t * (bounds.upper - bounds.lower);
-            ray.dir = Vec3(r * std::cos(phi), r * std::sin(phi), z);
-            ray.tmin = 0.0f;
-            ray.tmax = std::numeric_limits<float>::infinity();
-        }
+        rays_ = random_rays(bounds, rays, seed);
     }
 
     uint64_t pixels() const override { return rays_.size(); }
@@ -63,6 +53,20 @@ private:
 };
 
 }  // namespace
+
+std::vector<Ray> random_rays(const BBox& box, size_t count, uint64_t seed) {
+    std::mt19937_64 rng(seed);
+    std::uniform_real_distribution<float> unit(0.0f, 1.0f);
+    std::vector<Ray> rays(count);
+    for (Ray& ray : rays) {
+        const Vec3 s(unit(rng), unit(rng), unit(rng));
+        const float z = 2.0f * unit(rng) - 1.0f, phi = 2.0f * std::numbers::pi_v<float> * unit(rng);
+        const float r = std::sqrt(std::max(0.0f, 1.0f - z * z));
+        ray.org = box.lower + s * (box.upper - box.lower);
+        ray.dir = Vec3(r * std::cos(phi), r * std::sin(phi), z);
+    }
+    return rays;
+}
 
 std::shared_ptr<WorkloadSample> random_ray_sample(const FlatScene& flat, uint32_t rays, uint64_t seed) {
     return std::make_shared<RandomRaySample>(flat, rays, seed);

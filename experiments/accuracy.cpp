@@ -2,6 +2,7 @@
 #include "base/output_path.h"
 
 #include "engine/options.h"
+#include "engine/random_ray_sample.h"
 #include "experiments/command.h"
 #include "experiments/plot.h"
 #include "kernels/precise_distance.h"
@@ -167,21 +168,6 @@ AccuracyRow measure_case(const AccuracyOptions& o, const AccuracyCase& c, const 
         row.t_error_max = *std::max_element(t_errors.begin(), t_errors.end());
     }
     return row;
-}
-
-// Origins uniform in the box, directions uniform on the sphere (engine/random_ray_sample.cpp's rays).
-std::vector<Ray> random_rays(const BBox& box, size_t count, uint64_t seed) {
-    std::mt19937_64 rng(seed);
-    std::uniform_real_distribution<float> unit(0.0f, 1.0f);
-    std::vector<Ray> rays(count);
-    for (Ray& ray : rays) {
-        const Vec3 s(unit(rng), unit(rng), unit(rng));
-        const float z = 2.0f * unit(rng) - 1.0f, phi = 2.0f * std::numbers::pi_v<float> * unit(rng);
-        const float r = std::sqrt(std::max(0.0f, 1.0f - z * z));
-        ray.org = box.lower + s * (box.upper - box.lower);
-        ray.dir = Vec3(r * std::cos(phi), r * std::sin(phi), z);
-    }
-    return rays;
 }
 
 struct PreciseDistances {

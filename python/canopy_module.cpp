@@ -159,6 +159,17 @@ py::array_t<float, py::array::c_style> batch_interval(const py::object& object, 
     return converted<float>(a.attr("reshape")(-1), name);
 }
 
+// Runs f without the GIL; a std::invalid_argument it throws becomes a ValueError with the message name(what()).
+template <class F, class Name>
+void without_gil(F&& f, Name&& name) {
+    try {
+        py::gil_scoped_release unlocked;
+        f();
+    } catch (const std::invalid_argument& e) {
+        throw py::value_error(name(e.what()));
+    }
+}
+
 // A batch's rays as the C++ API takes them, kept alive while its views refer to them: (..., 6) rays split into
 // origins and directions, or separate (..., 3) origins and directions.
 struct RayArgs {
@@ -205,12 +216,7 @@ struct RayArgs {
     }
     template <class F>
     void run(F&& f) const {
-        try {
-            py::gil_scoped_release unlocked;
-            f();
-        } catch (const std::invalid_argument& e) {
-            throw py::value_error(python_name(e.what()));
-        }
+        without_gil(f, [&](std::string message) { return python_name(std::move(message)); });
     }
 };
 
@@ -388,36 +394,35 @@ py::dict scene_intersect(Scene& scene, const py::object& rays, const py::object&
     return py::dict("t"_a = t, "triangle"_a = triangle, "geometry"_a = geometry, "u"_a = u, "v"_a = v, "normal"_a = normal);
 }
 
-py::array_t<bool> scene_occluded(Scene& scene, const py::object& rays, const py::object& directions, const py::object& tmin,
-                                 const py::object& tmax, bool strict) {
-    const RayArgs args(rays, directions, tmin, tmax);
-    auto out = batch_output<bool>(args.shape);
+// A per-ray answer of type T: query(accel, batch, out) where the scene has triangles, `miss` for every ray where not.
+template <class T, class Query>
+py::array_t<T> scene_per_ray(Scene& scene, const RayArgs& args, bool strict, T miss, Query&& query) {
+    auto out = batch_output<T>(args.shape);
     if (const canopy::Accel* accel = scene.accel()) {
-        args.run([&] { accel->occluded(args.batch(strict), span_of(out)); });
+        args.run([&] { query(*accel, args.batch(strict), out); });
     } else {
         args.run([&] { canopy::Accel::check_rays(args.batch(strict)); });
-        fill(out, false);
+        fill(out, miss);
     }
     return out;
 }
 
+py::array_t<bool> scene_occluded(Scene& scene, const py::object& rays, const py::object& directions, const py::object& tmin,
+                                 const py::object& tmax, bool strict) {
+    return scene_per_ray(scene, RayArgs(rays, directions, tmin, tmax), strict, false,
+                         [](const canopy::Accel& accel, const canopy::RayBatch& batch, py::array_t<bool>& out) { accel.occluded(batch, span_of(out)); });
+}
+
 py::array_t<int32_t> scene_count(Scene& scene, const py::object& rays, const py::object& directions, const py::object& tmin,
                                  const py::object& tmax, bool strict) {
-    const RayArgs args(rays, directions, tmin, tmax);
-    auto out = batch_output<int32_t>(args.shape);
-    if (const canopy::Accel* accel = scene.accel()) {
-        args.run([&] { accel->count_hits(args.batch(strict), ids_of(out)); });
-    } else {
-        args.run([&] { canopy::Accel::check_rays(args.batch(strict)); });
-        fill(out, 0);
-    }
-    return out;
+    return scene_per_ray(scene, RayArgs(rays, directions, tmin, tmax), strict, int32_t(0),
+                         [](const canopy::Accel& accel, const canopy::RayBatch& batch, py::array_t<int32_t>& out) { accel.count_hits(batch, ids_of(out)); });
 }
 
 template <class T, class U = T>
 py::array_t<T> to_numpy(const std::vector<U>& values) {
     py::array_t<T> out(py::ssize_t(values.size()));
-    std::memcpy(out.mutable_data(), values.data(), values.size() * sizeof(T));
+    if (!values.empty()) std::memcpy(out.mutable_data(), values.data(), values.size() * sizeof(T));  // no null source
     return out;
 }
 
@@ -449,12 +454,7 @@ struct PointArgs {
     std::span<const float> values() const { return floats(points); }
     template <class F>
     void run(F&& f) const {
-        try {
-            py::gil_scoped_release unlocked;
-            f();
-        } catch (const std::invalid_argument& e) {
-            throw py::value_error(e.what());
-        }
+        without_gil(f, [](std::string message) { return message; });
     }
     // The errors a scene without triangles still raises (strict): a non-finite point.
     void check(bool strict) const {
