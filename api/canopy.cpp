@@ -239,9 +239,10 @@ struct Accel::Impl {
             for (const Vec3& p : {t.v0, t.v1, t.v2}) largest_coordinate = std::max({largest_coordinate, std::abs(p.x), std::abs(p.y), std::abs(p.z)});
     }
 
-    // The ray the kernel traces for a query's ray: its interval reaches past tmax by the kernel's error in t, which
-    // is a few float spacings of the largest coordinate relative to the origin over the direction's largest
-    // component; precise distances then decide what lies in (tmin, tmax].
+    // The ray the kernel traces for a query's ray: its interval reaches past tmax by a bound on the kernel's error
+    // in t, 2^-18 (32 float spacings) of the largest coordinate relative to the origin over the direction's largest
+    // component, a few times the largest error measured (docs/results.md#precise-distances-for-short-hits); precise
+    // distances then decide what lies in (tmin, tmax].
     Ray kernel_ray(const Ray& ray) const {
         Ray wider = ray;
         if (!std::isinf(ray.tmax)) wider.tmax = ray.tmax + kernel_t_error(ray);
