@@ -13,8 +13,9 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
-#include <span>
+#include <memory>
 #include <optional>
+#include <span>
 #include <string>
 #include <type_traits>
 
@@ -307,8 +308,23 @@ py::array_t<bool> occluded(const canopy::Accel& accel, const py::object& origins
     return out;
 }
 
+// The accelerator over a scene's meshes as they were at a query, and the geometry id of each of its instances (the
+// meshes with triangles, in order). Null accel: no triangles.
+struct BuiltScene {
+    std::unique_ptr<canopy::Accel> accel;
+    std::vector<int32_t> geometry;
+
+    // Instance numbers of the C++ API as geometry ids, in place.
+    void to_geometry(py::array_t<int32_t>& ids) const {
+        int32_t* p = ids.mutable_data();
+        for (py::ssize_t i = 0; i < ids.size(); ++i) p[i] = p[i] < 0 ? -1 : geometry[size_t(p[i])];
+    }
+};
+
 // A scene of several meshes, each with its geometry id (the order of add_mesh), built at its first query after a
-// change. Meshes without triangles take an id and build nothing; a scene without triangles misses every ray.
+// change. Meshes without triangles take an id and build nothing; a scene without triangles misses every ray. Its
+// methods run with the GIL held and builds without it; a query keeps the build it started with, so add_mesh from
+// another thread meanwhile changes the next query's answers, never the running one's.
 class Scene {
 public:
     explicit Scene(canopy::AccelOptions options) : options_(std::move(options)) {}
@@ -316,50 +332,43 @@ public:
     int add_mesh(const py::object& vertices, const py::object& triangles) {
         const py::array t = as_array(triangles, "triangles");
         const bool empty = t.ndim() == 2 && t.shape(0) == 0 && t.shape(1) == 3;
-        Mesh mesh;
+        auto mesh = std::make_shared<Mesh>();
         if (!empty) {
             const auto v = float_array(vertices, "vertices");
             const py::array checked = index_array(t, "triangles", size_t(v.shape(0)));
             check_mesh(v, checked);
             const auto indices = converted<uint32_t>(checked, "triangles");
-            mesh.vertices.assign(v.data(), v.data() + v.size());
-            mesh.triangles.assign(indices.data(), indices.data() + indices.size());
+            mesh->vertices.assign(v.data(), v.data() + v.size());
+            mesh->triangles.assign(indices.data(), indices.data() + indices.size());
         }
         meshes_.push_back(std::move(mesh));
-        accel_.reset();
-        built_ = false;
+        built_.reset();
         return int(meshes_.size() - 1);
     }
 
-    // The accelerator over the meshes with triangles, built now if a mesh was added since; null without triangles.
-    const canopy::Accel* accel() {
-        if (built_) return accel_.get();
+    // The build of the meshes added so far, made now if a mesh was added since the last one.
+    std::shared_ptr<const BuiltScene> built() {
+        if (built_) return built_;
+        const std::vector<std::shared_ptr<const Mesh>> meshes = meshes_;  // alive while the GIL is released
+        auto built = std::make_shared<BuiltScene>();
         std::vector<canopy::MeshArrays> arrays;
-        geometry_.clear();
-        for (size_t id = 0; id < meshes_.size(); ++id) {
-            if (meshes_[id].triangles.empty()) continue;
-            arrays.push_back({meshes_[id].vertices, meshes_[id].triangles});
-            geometry_.push_back(int32_t(id));
+        for (size_t id = 0; id < meshes.size(); ++id) {
+            if (meshes[id]->triangles.empty()) continue;
+            arrays.push_back({meshes[id]->vertices, meshes[id]->triangles});
+            built->geometry.push_back(int32_t(id));
         }
         if (!arrays.empty()) {
             py::gil_scoped_release unlocked;
             try {
-                accel_ = std::make_unique<canopy::Accel>(arrays, std::span<const canopy::MeshInstance>{}, options_);
+                built->accel = std::make_unique<canopy::Accel>(arrays, std::span<const canopy::MeshInstance>{}, options_);
             } catch (const std::exception& e) {
                 throw std::invalid_argument(std::string("Scene: ") + e.what());
             }
         }
-        built_ = true;
-        return accel_.get();
+        if (meshes_.size() == meshes.size()) built_ = built;  // no mesh was added while it built
+        return built;
     }
 
-    // Instance numbers of the C++ API (the meshes with triangles, in order) as geometry ids, in place.
-    void to_geometry(py::array_t<int32_t>& ids) const {
-        int32_t* p = ids.mutable_data();
-        for (py::ssize_t i = 0; i < ids.size(); ++i) p[i] = p[i] < 0 ? -1 : geometry_[size_t(p[i])];
-    }
-
-    const canopy::AccelOptions& options() const { return options_; }
     size_t meshes() const { return meshes_.size(); }
 
 private:
@@ -368,10 +377,8 @@ private:
         std::vector<uint32_t> triangles;
     };
     canopy::AccelOptions options_;
-    std::vector<Mesh> meshes_;
-    std::vector<int32_t> geometry_;  // geometry id of each C++ instance
-    std::unique_ptr<canopy::Accel> accel_;
-    bool built_ = false;
+    std::vector<std::shared_ptr<const Mesh>> meshes_;
+    std::shared_ptr<const BuiltScene> built_;
 };
 
 template <class T>
@@ -383,10 +390,11 @@ py::dict scene_intersect(Scene& scene, const py::object& rays, const py::object&
     auto t = batch_output<float>(args.shape), u = batch_output<float>(args.shape), v = batch_output<float>(args.shape);
     auto normal = batch_output<float>(args.shape, {3});
     auto triangle = batch_output<int32_t>(args.shape), geometry = batch_output<int32_t>(args.shape);
-    if (const canopy::Accel* accel = scene.accel()) {
+    const auto built = scene.built();
+    if (const canopy::Accel* accel = built->accel.get()) {
         const canopy::HitBatch hits{span_of(t), ids_of(triangle), span_of(u), span_of(v), ids_of(geometry), span_of(normal)};
         args.run([&] { accel->intersect(args.batch(strict), hits); });
-        scene.to_geometry(geometry);
+        built->to_geometry(geometry);
     } else {
         args.run([&] { canopy::Accel::check_rays(args.batch(strict)); });
         fill(t, canopy::kInfinity), fill(u, 0.0f), fill(v, 0.0f), fill(normal, 0.0f), fill(triangle, -1), fill(geometry, -1);
@@ -398,7 +406,8 @@ py::dict scene_intersect(Scene& scene, const py::object& rays, const py::object&
 template <class T, class Query>
 py::array_t<T> scene_per_ray(Scene& scene, const RayArgs& args, bool strict, T miss, Query&& query) {
     auto out = batch_output<T>(args.shape);
-    if (const canopy::Accel* accel = scene.accel()) {
+    const auto built = scene.built();
+    if (const canopy::Accel* accel = built->accel.get()) {
         args.run([&] { query(*accel, args.batch(strict), out); });
     } else {
         args.run([&] { canopy::Accel::check_rays(args.batch(strict)); });
@@ -430,7 +439,8 @@ py::dict scene_list(Scene& scene, const py::object& rays, const py::object& dire
                     const py::object& tmax, bool strict) {
     const RayArgs args(rays, directions, tmin, tmax);
     canopy::HitList hits;
-    if (const canopy::Accel* accel = scene.accel()) {
+    const auto built = scene.built();
+    if (const canopy::Accel* accel = built->accel.get()) {
         args.run([&] { accel->intersect_all(args.batch(strict), hits); });
     } else {
         args.run([&] { canopy::Accel::check_rays(args.batch(strict)); });
@@ -440,7 +450,7 @@ py::dict scene_list(Scene& scene, const py::object& rays, const py::object& dire
     for (size_t i = 0; i + 1 < hits.offsets.size(); ++i)
         std::fill(ray.mutable_data() + hits.offsets[i], ray.mutable_data() + hits.offsets[i + 1], int64_t(i));
     py::array_t<int32_t> triangle = to_numpy<int32_t>(hits.triangle), geometry = to_numpy<int32_t>(hits.instance);
-    if (scene.accel()) scene.to_geometry(geometry);
+    built->to_geometry(geometry);
     return py::dict("offsets"_a = offsets, "ray"_a = ray, "t"_a = to_numpy<float>(hits.t), "triangle"_a = triangle,
                     "geometry"_a = geometry, "u"_a = to_numpy<float>(hits.u), "v"_a = to_numpy<float>(hits.v));
 }
@@ -471,10 +481,11 @@ py::dict scene_closest_points(Scene& scene, const py::object& object, bool stric
     auto point = batch_output<float>(args.shape, {3}), distance = batch_output<float>(args.shape);
     auto u = batch_output<float>(args.shape), v = batch_output<float>(args.shape);
     auto triangle = batch_output<int32_t>(args.shape), geometry = batch_output<int32_t>(args.shape);
-    if (const canopy::Accel* accel = scene.accel()) {
+    const auto built = scene.built();
+    if (const canopy::Accel* accel = built->accel.get()) {
         const canopy::PointBatch out{span_of(point), span_of(distance), ids_of(triangle), ids_of(geometry), span_of(u), span_of(v)};
         args.run([&] { accel->closest_points(args.values(), out, !strict); });
-        scene.to_geometry(geometry);
+        built->to_geometry(geometry);
     } else {
         args.check(strict);
         fill(point, std::numeric_limits<float>::quiet_NaN()), fill(distance, canopy::kInfinity);
@@ -490,7 +501,8 @@ py::array_t<float> scene_distance(Scene& scene, const py::object& object, bool s
 py::array_t<bool> scene_occupancy(Scene& scene, const py::object& object, bool strict) {
     const PointArgs args(object);
     auto inside = batch_output<bool>(args.shape);
-    if (const canopy::Accel* accel = scene.accel()) {
+    const auto built = scene.built();
+    if (const canopy::Accel* accel = built->accel.get()) {
         args.run([&] { accel->contains(args.values(), span_of(inside), !strict); });
     } else {
         args.check(strict);

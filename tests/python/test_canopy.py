@@ -342,3 +342,30 @@ def test_a_batch_too_large_for_memory_raises_a_value_error_naming_the_argument(q
     origins = np.broadcast_to(np.zeros(3, np.float32), (3_000_000_000, 3))
     with pytest.raises(ValueError, match="origins: cannot allocate"):
         build().intersect(origins, origins)
+
+
+def test_threads_share_a_scene_while_another_adds_meshes():
+    """Concurrent first queries build once or more but answer alike; a mesh added meanwhile changes later answers
+    only, and nothing a running query uses is freed under it."""
+    from concurrent.futures import ThreadPoolExecutor
+    vertices, triangles = random_scene(11)
+    origins, directions = random_rays(12, count=20000)
+    scene = canopy.Scene()
+    scene.add_mesh(vertices, triangles)
+    with ThreadPoolExecutor(4) as pool:
+        first = list(pool.map(lambda _: scene.intersect(origins, directions)["t"], range(4)))
+    for t in first[1:]:
+        assert np.array_equal(t, first[0])
+    moved = vertices + np.float32(0.01)
+
+    def query_or_add(i):
+        if i % 3 == 2:
+            return scene.add_mesh(moved, triangles)
+        return scene.intersect(origins, directions)["t"]
+
+    with ThreadPoolExecutor(4) as pool:
+        answers = list(pool.map(query_or_add, range(12)))
+    for t in answers:
+        if isinstance(t, np.ndarray):  # a closer hit can only appear where a mesh was added, never vanish
+            assert np.all(t <= first[0])
+    assert scene.meshes == 5
