@@ -235,8 +235,8 @@ struct Accel::Impl {
             accelerator->build();
             build_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
         });
-        for (const Triangle& t : flat.triangles)
-            for (const Vec3& p : {t.v0, t.v1, t.v2}) largest_coordinate = std::max({largest_coordinate, std::abs(p.x), std::abs(p.y), std::abs(p.z)});
+        const Vec3 corner = glm::max(glm::abs(flat.bounds.lower), glm::abs(flat.bounds.upper));
+        largest_coordinate = std::max({corner.x, corner.y, corner.z});
     }
 
     // The ray the kernel traces for a query's ray: its interval reaches past tmax by a bound on the kernel's error
@@ -275,7 +275,6 @@ struct Accel::Impl {
     // The kernel's closest hit of kernel_ray(ray), its distance made precise: a hit at t <= tmin on the exact plane
     // (an origin on the surface) does not count, and the ray goes on from there; one past tmax is a miss.
     Hit precise_closest(const Ray& ray, Hit hit) const {
-        Ray traced = kernel_ray(ray);
         for (;;) {
             if (!hit.found()) return hit;
             const double t = precise_t(flat.triangles[hit.prim], ray);
@@ -284,6 +283,7 @@ struct Accel::Impl {
                 hit.t = interval_t(t, ray);
                 return hit;
             }
+            Ray traced = kernel_ray(ray);
             traced.tmin = hit.t;
             hit = accelerator->trace(traced);
         }
@@ -311,8 +311,8 @@ struct Accel::Impl {
                 const size_t count = range.size();
                 for (size_t k = 0; k < count; ++k) traced[k] = kernel_ray(chunk_rays[k]);
                 accelerator->trace_batch(query, {traced, count}, {chunk_hits, count});
-                // The hit triangles' reads for precise distances, issued together so that their misses overlap.
-                for (size_t k = 0; k < count; ++k)
+                // Closest hits' triangles, read for precise distances, fetched together so that their misses overlap.
+                for (size_t k = 0; k < count && query == Query::Closest; ++k)
                     if (chunk_hits[k].found()) _mm_prefetch(reinterpret_cast<const char*>(&flat.triangles[chunk_hits[k].prim]), _MM_HINT_T0);
                 for (size_t k = 0; k < count; ++k)
                     chunk_hits[k] = query == Query::Closest ? precise_closest(chunk_rays[k], chunk_hits[k]) : precise_any(chunk_rays[k], chunk_hits[k]);
