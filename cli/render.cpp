@@ -60,6 +60,7 @@ FrameSettings frame_settings(const RenderOptions& o) {
     settings.stream_paths = o.stream_paths;
     settings.batch_traversal = parse_batch_traversal(o.batch_traversal);
     settings.stream_batching = parse_stream_batching(o.stream_batching);
+    o.workload.apply(settings);
     return settings;
 }
 
@@ -153,6 +154,7 @@ void register_render(CLI::App& canopy) {
     render->add_option("--kernel", r->kernel, "Traversal kernel: auto (widest), bvh2, bvh4, bvh8")->capture_default_str();
     render->add_option("--accel", r->accel, "canopy or embree")->check(CLI::IsMember({"canopy", "embree"}))->capture_default_str();
     render->add_option("--embree-quality", r->embree_quality, "low, medium or high")->capture_default_str();
+    add_workload_options(*render, r->workload);
     render->add_option("--bounces", r->bounces, "Maximum bounces")->check(CLI::Range(0, 1024))->capture_default_str();
     render->add_option("--threads", r->threads, "Threads for every library (0: all)")->check(CLI::Range(0, 4096));
     render->add_flag("--quiet", r->quiet, kQuietHelp);

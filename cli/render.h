@@ -28,6 +28,7 @@ struct RenderOptions {
     std::string batch_traversal = "packet";  // stream: how batches are traced: single, packet, stream
     std::string stream_batching = "measured";  // stream: each batch's way: measured, wavefront, paths
     std::optional<uint64_t> memory_limit;    // bytes: lowers the memory bound below what the machine has free
+    WorkloadOptions workload;
 };
 
 void run_render(RenderOptions options);

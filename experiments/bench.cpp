@@ -160,6 +160,7 @@ std::vector<Entry> make_entries(const Scene& scene, const FlatScene& flat, const
     std::vector<Entry> entries;
     FrameSettings frame;  // the frame auto rows plan for, as render_frames sets it
     frame.width = o.width, frame.height = o.height, frame.max_bounces = o.bounces, frame.material_albedo = o.material_albedo;
+    o.workload.apply(frame);
     for (const std::string& toplevel : o.toplevels)
         for (const std::string& builder : toplevel == "flat" || o.blas_builders.empty() ? o.builders : o.blas_builders)
             for (const std::string& kernel : o.kernels)
@@ -335,6 +336,7 @@ nlohmann::json results_json(const std::vector<Entry>& entries, uint64_t tris) {
                            {"frames_planned", e.accel->frames_planned() ? nlohmann::json(e.accel->frames_planned()) : nlohmann::json(nullptr)},
                            {"quality", canopy ? nlohmann::json(nullptr) : nlohmann::json(e.accel->quality())},
                            {"tracer", tracer_name(e.tracer)},
+                           {"workload", workload_name(e.settings.workload)},
                            {"threads", e.threads},
                            {"rebraid_threshold", or_null(e.rebraid_threshold)},
                            {"builder_params", e.builder_params},
@@ -381,7 +383,8 @@ nlohmann::json results_json(const std::vector<Entry>& entries, uint64_t tris) {
 
 nlohmann::json to_json(const nlohmann::json& results, const BenchOptions& o, uint64_t tris) {
     return {{"scene", o.scene}, {"tris", tris}, {"threads", o.threads}, {"width", o.width},
-            {"height", o.height}, {"bounces", o.bounces}, {"stream_paths", o.stream_paths}, {"results", results}};
+            {"height", o.height}, {"bounces", o.bounces}, {"stream_paths", o.stream_paths},
+            {"workload", o.workload.workload}, {"results", results}};
 }
 
 // The progress line's text for a row's step: "bench SCENE, ROW: build 2 of 20".
@@ -445,6 +448,7 @@ void render_frames(std::vector<Entry>& entries, const Scene& scene, FlatScene& f
         FrameSettings& s = e.settings;
         s.width = o.width, s.height = o.height, s.max_bounces = o.bounces, s.material_albedo = o.material_albedo;
         s.tracer = e.tracer, s.stream_paths = o.stream_paths;
+        o.workload.apply(s);
         shading.push_back({flat, s, e.tracer == TracerKind::Stream ? e.stream.get() : nullptr});
     }
     const PinholeCamera camera(scene_camera(scene, flat), o.width, o.height);
@@ -547,6 +551,13 @@ void report_static(const std::vector<Entry>& entries, uint64_t tris, bool explai
     }
 }
 
+// "ao (4 rays of length 1.5)" or the workload's name.
+std::string workload_text(const WorkloadOptions& w) {
+    if (w.workload != "ao") return w.workload;
+    const std::string length = w.ao_length > 0.0f ? "length " + std::to_string(w.ao_length) : "a tenth of the diagonal";
+    return "ao (" + std::to_string(w.ao_rays) + " rays of " + length + ")";
+}
+
 // "2" or "1, 2": the thread counts of the protocol line ("all" for 0).
 std::string thread_counts_text(const std::vector<int>& counts) {
     std::string text;
@@ -633,8 +644,8 @@ nlohmann::json bench_scene(const BenchOptions& o, LoadedScene& loaded, SceneRepo
                    o.width, o.height, o.bounces, o.frames, thread_counts_text(o.threads).c_str());
         return bench_dynamic(o, loaded, *dynamic, out);
     }
-    out.printf("protocol: %dx%d, %d bounces, %d builds (min), %d frames (mean) after 1 warm-up, threads %s%s\n",
-               o.width, o.height, o.bounces, o.builds, o.frames, thread_counts_text(o.threads).c_str(),
+    out.printf("protocol: %dx%d, workload %s, %d bounces, %d builds (min), %d frames (mean) after 1 warm-up, threads %s%s\n",
+               o.width, o.height, workload_text(o.workload).c_str(), o.bounces, o.builds, o.frames, thread_counts_text(o.threads).c_str(),
                std::count(o.tracers.begin(), o.tracers.end(), "stream")
                    ? ("; stream batches of " + std::to_string(o.stream_paths) + " paths").c_str() : "");
     return bench_static(o, loaded, out);
@@ -700,6 +711,7 @@ void add_protocol_options(CLI::App& bench, BenchCommand& c) {
     BenchOptions& b = c.options;
     bench.add_option("--builds", b.builds, "Builds (minimum reported)")->check(CLI::Range(1, 10000))->capture_default_str();
     bench.add_option("--frames", b.frames, "Timed frames after one warm-up")->check(CLI::Range(1, 10000))->capture_default_str();
+    add_workload_options(bench, b.workload);
     bench.add_option("--bounces", b.bounces, "Maximum bounces")->check(CLI::Range(0, 1024))->capture_default_str();
     bench.add_option("--json", b.json_path, "Write results as JSON");
     bench.add_flag("!--no-epo", b.epo, "Skip EPO in the report (minutes on millions of triangles)");

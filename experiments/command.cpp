@@ -1,4 +1,5 @@
 #include "experiments/command.h"
+#include "renderer/path_tracer.h"
 
 #include <CLI/CLI.hpp>
 
@@ -26,6 +27,23 @@ void add_memory_limit_option(CLI::App& command, std::optional<uint64_t>& bytes) 
         ->transform(CLI::AsSizeValue(false))
         // A transform goes ahead of those added before it: this one sees the text as typed, before its reading as a size.
         ->transform(CLI::Validator(positive_or_not_a_number, ""));
+}
+
+void WorkloadOptions::apply(FrameSettings& settings) const {
+    settings.workload = parse_workload(workload);
+    settings.ao_rays = ao_rays;
+    settings.ao_length = ao_length;
+}
+
+void add_workload_options(CLI::App& command, WorkloadOptions& options) {
+    command.add_option("--workload", options.workload, kWorkloadHelp)
+        ->check(CLI::IsMember({"diffuse", "camera", "nee", "ao"}))
+        ->capture_default_str();
+    command.add_option("--ao-rays", options.ao_rays, "ao: occlusion rays from each camera hit")
+        ->check(CLI::Range(1, 1024))
+        ->capture_default_str();
+    command.add_option("--ao-length", options.ao_length, "ao: the occlusion rays' length (default: a tenth of the scene box's diagonal)")
+        ->check(CLI::PositiveNumber);
 }
 
 }  // namespace canopy

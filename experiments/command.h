@@ -6,12 +6,24 @@
 #include <cstdint>
 #include <memory>
 #include <optional>
+#include <string>
 
 namespace CLI {
 class App;
 }
 
 namespace canopy {
+
+struct FrameSettings;
+
+// The rays a frame traces (render, bench, tradeoff): --workload, --ao-rays and --ao-length.
+struct WorkloadOptions {
+    std::string workload = "diffuse";
+    int ao_rays = 4;
+    float ao_length = 0.0f;  // 0: a tenth of the scene box's diagonal
+    void apply(FrameSettings& settings) const;  // throws std::invalid_argument for an unknown workload
+};
+void add_workload_options(CLI::App& command, WorkloadOptions& options);
 
 inline constexpr const char* kLayoutHelp =
     "bvh8 nodes: standard (256 bytes, float planes) or compressed (128 bytes, planes quantised to 8 bits, "

@@ -87,6 +87,15 @@ struct EmbreeTracer {
         surface = ray_surface(ray, r.t, r.normal, r.prim);
         return true;
     }
+    // Shadow and ambient-occlusion rays through rtcOccluded1, which sets tfar to -inf on a hit.
+    bool occluded(const Ray& ray) const {
+        RTCIntersectContext context;
+        rtcInitIntersectContext(&context);
+        RTCRayHit rh;
+        to_embree(ray, rh);
+        rtcOccluded1(scene, &context, &rh.ray);
+        return rh.ray.tfar < 0.0f;
+    }
     // Tests' and tools' query, with the barycentrics a Hit carries.
     bool closest(const Ray& ray, Hit& hit) const {
         const RTCRayHit rh = intersect(ray);
@@ -125,16 +134,51 @@ struct EmbreeBatchTracer {
         for (size_t i = 0; i < rays.size(); ++i) hits[i] = record_of(instances, scratch.rays[i]);
     }
 
-    void closest16(std::span<const Ray> rays, std::span<EmbreeRecord> hits, RTCRayHit16& p) const {
-        alignas(64) int valid[16];
+    // Shadow and ambient-occlusion batches through rtcOccluded1M or rtcOccluded16: a blocked ray's record is found.
+    void occluded(std::span<const Ray> rays, std::span<EmbreeRecord> hits, Scratch& scratch) const {
+        if (packets) {
+            for (size_t first = 0; first < rays.size(); first += 16)
+                occluded16(rays.subspan(first, std::min<size_t>(16, rays.size() - first)), hits.subspan(first), scratch.packet);
+            return;
+        }
+        if (rays.empty()) return;
+        scratch.rays.resize(rays.size());
+        for (size_t i = 0; i < rays.size(); ++i) to_embree(rays[i], scratch.rays[i]);
+        RTCIntersectContext context;
+        rtcInitIntersectContext(&context);
+        context.flags = RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
+        rtcOccluded1M(scene, &context, &scratch.rays[0].ray, unsigned(rays.size()), sizeof(RTCRayHit));
+        for (size_t i = 0; i < rays.size(); ++i) hits[i] = blocked_record(scratch.rays[i].ray.tfar);
+    }
+    static EmbreeRecord blocked_record(float tfar) { return tfar < 0.0f ? EmbreeRecord{0.0f, 0, Vec3(0.0f)} : EmbreeRecord{}; }
+
+    // Packet i's rays from rays[i], the rest of the 16 lanes invalid.
+    static void fill16(std::span<const Ray> rays, RTCRay16& p, int* valid) {
         for (size_t i = 0; i < 16; ++i) {
             valid[i] = i < rays.size() ? -1 : 0;
             if (i >= rays.size()) continue;
             const Ray& r = rays[i];
-            p.ray.org_x[i] = r.org.x, p.ray.org_y[i] = r.org.y, p.ray.org_z[i] = r.org.z;
-            p.ray.dir_x[i] = r.dir.x, p.ray.dir_y[i] = r.dir.y, p.ray.dir_z[i] = r.dir.z;
-            p.ray.tnear[i] = r.tmin, p.ray.tfar[i] = r.tmax, p.ray.time[i] = 0.0f;
-            p.ray.mask[i] = 0xffffffffu, p.ray.id[i] = uint32_t(i), p.ray.flags[i] = 0;
+            p.org_x[i] = r.org.x, p.org_y[i] = r.org.y, p.org_z[i] = r.org.z;
+            p.dir_x[i] = r.dir.x, p.dir_y[i] = r.dir.y, p.dir_z[i] = r.dir.z;
+            p.tnear[i] = r.tmin, p.tfar[i] = r.tmax, p.time[i] = 0.0f;
+            p.mask[i] = 0xffffffffu, p.id[i] = uint32_t(i), p.flags[i] = 0;
+        }
+    }
+
+    void occluded16(std::span<const Ray> rays, std::span<EmbreeRecord> hits, RTCRayHit16& p) const {
+        alignas(64) int valid[16];
+        fill16(rays, p.ray, valid);
+        RTCIntersectContext context;
+        rtcInitIntersectContext(&context);
+        context.flags = RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
+        rtcOccluded16(valid, scene, &context, &p.ray);
+        for (size_t i = 0; i < rays.size(); ++i) hits[i] = blocked_record(p.ray.tfar[i]);
+    }
+
+    void closest16(std::span<const Ray> rays, std::span<EmbreeRecord> hits, RTCRayHit16& p) const {
+        alignas(64) int valid[16];
+        fill16(rays, p.ray, valid);
+        for (size_t i = 0; i < rays.size(); ++i) {
             p.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
             p.hit.instID[0][i] = RTC_INVALID_GEOMETRY_ID;
         }

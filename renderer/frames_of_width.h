@@ -44,6 +44,9 @@ struct BatchTracer {
     void closest(std::span<const Ray> rays, std::span<Hit> hits, Scratch& scratch) const {
         kernel.template batch<Query::Closest>(rays, hits, scratch, how);
     }
+    void occluded(std::span<const Ray> rays, std::span<Hit> hits, Scratch& scratch) const {
+        kernel.template batch<Query::Any>(rays, hits, scratch, how);
+    }
 };
 
 // The single-ray tracer through the counting kernel, each thread adding to its own counts.
@@ -52,6 +55,10 @@ struct CountingTracer {
     Kernel kernel;
     tbb::enumerable_thread_specific<TraversalCounts>& counts;
     bool closest(const Ray& ray, Hit& hit) const { return kernel.query(ray, hit, counts.local()); }
+    bool occluded(const Ray& ray) const {
+        Hit hit;
+        return kernel.template query<Query::Any>(ray, hit, counts.local());
+    }
 };
 
 // Calls f(kernel) for a kernel of width N; instantiated for each width in its own translation unit.

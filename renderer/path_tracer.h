@@ -5,6 +5,7 @@
 #include "kernels/traverse_stream.h"
 #include "renderer/camera.h"
 #include "renderer/image.h"
+#include "renderer/lights.h"
 #include "renderer/sampling.h"
 #include "renderer/stream_choice.h"
 #include "scenes/scene.h"
@@ -14,6 +15,10 @@
 #include <atomic>
 #include <functional>
 #include <memory>
+#include <numbers>
+#include <optional>
+#include <stdexcept>
+#include <string>
 #include <vector>
 
 namespace canopy {
@@ -21,6 +26,24 @@ namespace canopy {
 // How a frame's paths meet the accelerator: one path at a time to its end (`single`, the protocol's reference), or
 // every path of a batch one bounce at a time, each bounce's rays traced as one sorted batch (`stream`, wavefront.h).
 enum class TracerKind { Single, Stream };
+
+// The rays a frame traces (docs/workloads.md): the protocol's diffuse paths; one closest-hit camera ray a pixel;
+// diffuse paths with next-event estimation, a shadow ray (any hit) to a light at each bounce; or a camera ray and
+// ambient-occlusion rays (any hit) from its hit.
+enum class Workload { Diffuse, Camera, Nee, Ao };
+inline const char* workload_name(Workload workload) {
+    constexpr const char* kNames[] = {"diffuse", "camera", "nee", "ao"};
+    return kNames[int(workload)];
+}
+inline Workload parse_workload(const std::string& name) {
+    for (Workload w : {Workload::Diffuse, Workload::Camera, Workload::Nee, Workload::Ao})
+        if (name == workload_name(w)) return w;
+    throw std::invalid_argument("unknown workload '" + name + "' (known: diffuse, camera, nee, ao)");
+}
+inline constexpr const char* kWorkloadHelp =
+    "Rays traced: diffuse (the protocol's paths), camera (one closest-hit ray a pixel), nee (paths with a shadow ray "
+    "to a light at each bounce, weighed by multiple importance sampling), ao (a camera ray and --ao-rays occlusion "
+    "rays from its hit)";
 
 struct FrameSettings {
     int width = 1024, height = 768;
@@ -37,6 +60,9 @@ struct FrameSettings {
     uint32_t sample_stride = 1;
     bool material_albedo = false;  // protocol: albedo 0.8 everywhere unless the scene asks for Kd
     float albedo = 0.8f;
+    Workload workload = Workload::Diffuse;
+    int ao_rays = 4;         // ao: occlusion rays from each camera hit
+    float ao_length = 0.0f;  // ao: their length; 0 for a tenth of the scene box's diagonal
 };
 
 struct StreamStats;
@@ -50,6 +76,9 @@ struct ShadingScene {
     // Decided once per frame, so that the protocol's paths (no --materials) and scenes without lights pay one
     // predictable branch per bounce and add nothing to their radiance.
     bool emitters = settings.material_albedo && flat.has_emitters;
+    // nee: the scene's emitters, or the sun where there are none.
+    std::shared_ptr<const Lights> lights = settings.workload == Workload::Nee ? std::make_shared<Lights>(flat, emitters) : nullptr;
+    float ao_length = settings.ao_length > 0.0f ? settings.ao_length : 0.1f * glm::length(flat.bounds.upper - flat.bounds.lower);
 
     Vec3 albedo(uint32_t prim) const {
         if (settings.material_albedo && !flat.material.empty()) return flat.materials[flat.material[prim]].kd;
@@ -85,6 +114,14 @@ inline SurfaceHit ray_surface(const Ray& ray, float t, const Vec3& normal, uint3
     return {normal, p, ray_point_error(p, t), prim};
 }
 
+// The hit's unit normal, turned to face the ray (the ray's reverse where the triangle has no normal).
+[[gnu::always_inline]] inline Vec3 facing_normal(const Ray& ray, const SurfaceHit& surface) {
+    Vec3 n = surface.normal;
+    const float len2 = glm::dot(n, n);
+    n = len2 > 0.0f && std::isfinite(len2) ? n / std::sqrt(len2) : -ray.dir;
+    return glm::dot(n, ray.dir) > 0.0f ? -n : n;
+}
+
 // One bounce's shading, shared by every tracer so that `single` and `stream` paths mean the same: a miss adds the
 // white sky and ends the path; a hit adds what its material emits (under --materials; no next-event estimation),
 // takes the albedo and, unless `depth` was the last bounce, turns `ray` into the next bounce's ray. Returns whether
@@ -95,10 +132,7 @@ inline SurfaceHit ray_surface(const Ray& ray, float t, const Vec3& normal, uint3
         path.radiance += path.throughput;  // white sky
         return false;
     }
-    Vec3 n = surface.normal;
-    const float len2 = glm::dot(n, n);
-    n = len2 > 0.0f && std::isfinite(len2) ? n / std::sqrt(len2) : -ray.dir;
-    if (glm::dot(n, ray.dir) > 0.0f) n = -n;
+    const Vec3 n = facing_normal(ray, surface);
     if (scene.emitters) path.radiance += path.throughput * scene.emission(surface.prim);
     path.throughput *= scene.albedo(surface.prim);
     if (depth == scene.settings.max_bounces) return false;
@@ -148,14 +182,160 @@ Vec3 trace_path(const Tracer& tracer, const ShadingScene& scene, Ray& ray, Rng& 
     return path.radiance;
 }
 
-// Pixel (x, y)'s path of frame `frame`, added to `accumulated`.
+// A tracer's any-hit query: its own (Embree's rtcOccluded1), the kernel's any-hit traversal, or else (tests' oracles)
+// whether it finds a closest hit within the ray's interval.
+template <class Tracer>
+[[gnu::always_inline]] inline bool occluded(const Tracer& tracer, const Ray& ray) {
+    Hit hit;
+    if constexpr (requires { tracer.occluded(ray); }) return tracer.occluded(ray);
+    else if constexpr (requires { tracer.template query<Query::Any>(ray, hit); }) return tracer.template query<Query::Any>(ray, hit);
+    else return tracer.closest(ray, hit);
+}
+
+// The ray leaving a hit along `dir`, up to `tmax`.
+inline Ray leaving_ray(const SurfaceHit& surface, const Vec3& n, const Vec3& dir, float tmax) {
+    Ray ray;
+    ray.org = offset_ray_origin(surface.point, n, surface.point_error);
+    ray.dir = dir;
+    ray.tmin = 0.0f;
+    ray.tmax = tmax;
+    return ray;
+}
+
+// `camera`: the camera ray's closest hit lit from the eye (albedo times the cosine to the ray, plus emission); the
+// white sky on a miss.
+inline Vec3 camera_radiance(const ShadingScene& scene, const Ray& ray, bool found, const SurfaceHit& surface) {
+    if (!found) return Vec3(1.0f);
+    const Vec3 lit = scene.albedo(surface.prim) * -glm::dot(facing_normal(ray, surface), ray.dir);
+    return scene.emitters ? lit + scene.emission(surface.prim) : lit;
+}
+
+template <class Tracer>
+Vec3 trace_camera(const Tracer& tracer, const ShadingScene& scene, const Ray& ray, uint64_t& rays) {
+    ++rays;
+    SurfaceHit surface;
+    const bool found = closest_surface(tracer, scene, ray, surface);
+    return camera_radiance(scene, ray, found, surface);
+}
+
+// `ao`: settings.ao_rays cosine-weighted rays of length ao_length from a camera ray's hit, each made by ao_probe from
+// the first, ao_base; the share of them that reach nothing is the pixel's value (the white sky's irradiance there
+// over pi), 1 on a miss.
+inline Ray ao_base(const ShadingScene& scene, const Ray& ray, const SurfaceHit& surface) {
+    const Vec3 n = facing_normal(ray, surface);
+    return leaving_ray(surface, n, n, scene.ao_length);
+}
+inline Ray ao_probe(const Ray& base, Rng& rng) {
+    Ray probe = base;
+    probe.dir = cosine_direction(base.dir, rng.next_float(), rng.next_float());
+    return probe;
+}
+inline Vec3 ao_radiance(int open, int probes) { return Vec3(float(open) / float(probes)); }
+
+template <class Tracer>
+Vec3 trace_ao(const Tracer& tracer, const ShadingScene& scene, const Ray& ray, Rng& rng, uint64_t& rays) {
+    ++rays;
+    SurfaceHit surface;
+    if (!closest_surface(tracer, scene, ray, surface)) return Vec3(1.0f);
+    const Ray base = ao_base(scene, ray, surface);
+    const int count = scene.settings.ao_rays;
+    int open = 0;
+    for (int k = 0; k < count; ++k) open += !occluded(tracer, ao_probe(base, rng));
+    rays += uint64_t(count);
+    return ao_radiance(open, count);
+}
+
+// The share of a sampled light's distance a shadow ray stops short of, so that it does not find the emitter it aims
+// at (the sun's rays are unbounded).
+constexpr float kShadowShortening = 1e-3f;
+
+// A path's shadow ray, and what it adds to the path's radiance if it reaches its light.
+struct ShadowRay {
+    Ray ray;
+    Vec3 contribution;
+};
+
+// The state of a `nee` path between bounces beyond PathState's.
+struct NeeState {
+    float bounce_pdf = 0.0f;  // the solid angle pdf of the bounce that made the current ray (none for the camera's)
+};
+
+// `nee`: one bounce of the diffuse path with next-event estimation. At every bounce that continues, one light sample
+// through a shadow ray (any hit; returned in `shadow`, which is traced by the caller) and the cosine-weighted bounce,
+// each weighed against the other's pdf by the power heuristic (Veach 1997, sec. 9.2); the white sky is found by
+// bounces alone. Emitters count on either side, as under `diffuse`, so with the scene's emitters as lights both
+// converge to the same image. Returns whether the path goes on, from `next`.
+[[gnu::always_inline]] inline bool nee_bounce(const ShadingScene& scene, const Ray& ray, bool found, const SurfaceHit& surface,
+                                              int depth, PathState& path, NeeState& nee, Rng& rng, Ray& next,
+                                              std::optional<ShadowRay>& shadow) {
+    constexpr float kInvPi = std::numbers::inv_pi_v<float>;
+    const Lights& lights = *scene.lights;
+    shadow.reset();
+    if (!found) {
+        float sun = 0.0f;
+        if (lights.in_sun(ray.dir)) sun = Lights::sun_radiance() * (depth > 0 ? power_heuristic(nee.bounce_pdf, lights.sun_pdf()) : 1.0f);
+        path.radiance += path.throughput * (1.0f + sun);
+        return false;
+    }
+    const Vec3 n = facing_normal(ray, surface);
+    if (scene.emitters) {
+        const Vec3 le = scene.emission(surface.prim);
+        if (le != Vec3(0.0f)) {
+            const float d = glm::length(surface.point - ray.org);
+            const float w = depth > 0 ? power_heuristic(nee.bounce_pdf, lights.emitter_pdf(le, d, -glm::dot(n, ray.dir))) : 1.0f;
+            path.radiance += path.throughput * le * w;
+        }
+    }
+    path.throughput *= scene.albedo(surface.prim);
+    if (depth == scene.settings.max_bounces) return false;
+    const LightSample light = lights.sample(surface.point, rng.next_float(), rng.next_float(), rng.next_float());
+    const float cos_light = glm::dot(n, light.direction);
+    if (light.pdf > 0.0f && cos_light > 0.0f) {
+        const float bsdf_pdf = cos_light * kInvPi;
+        shadow = ShadowRay{leaving_ray(surface, n, light.direction, light.distance * (1.0f - kShadowShortening)),
+                           path.throughput * light.radiance * (bsdf_pdf / light.pdf * power_heuristic(light.pdf, bsdf_pdf))};
+    }
+    const Vec3 dir = cosine_direction(n, rng.next_float(), rng.next_float());
+    next.org = offset_ray_origin(surface.point, n, surface.point_error);
+    next.dir = dir;
+    next.tmin = 0.0f;
+    next.tmax = std::numeric_limits<float>::infinity();
+    nee.bounce_pdf = glm::dot(n, dir) * kInvPi;
+    return true;
+}
+
+template <class Tracer>
+Vec3 trace_nee_path(const Tracer& tracer, const ShadingScene& scene, Ray& ray, Rng& rng, uint64_t& rays) {
+    PathState path;
+    NeeState nee;
+    std::optional<ShadowRay> shadow;
+    for (int depth = 0;; ++depth) {
+        ++rays;
+        SurfaceHit surface;
+        const bool found = closest_surface(tracer, scene, ray, surface);
+        const bool goes_on = nee_bounce(scene, ray, found, surface, depth, path, nee, rng, ray, shadow);
+        if (shadow) {
+            ++rays;
+            if (!occluded(tracer, shadow->ray)) path.radiance += shadow->contribution;
+        }
+        if (!goes_on) break;
+    }
+    return path.radiance;
+}
+
+// Pixel (x, y)'s sample of frame `frame` in the frame's workload, added to `accumulated`.
 template <class Tracer>
 [[gnu::always_inline]] inline void trace_pixel(const Tracer& tracer, const ShadingScene& scene, const PinholeCamera& camera,
                                                uint32_t frame, int x, int y, Image& accumulated, uint64_t& rays) {
     Rng rng(uint64_t(y) * uint64_t(scene.settings.width) + uint64_t(x), frame);
     const float u = rng.next_float(), v = rng.next_float();
     Ray ray = camera.generate(x, y, u, v);  // built in place: trace_path takes it by reference
-    accumulated.add(x, y, trace_path(tracer, scene, ray, rng, rays));
+    switch (scene.settings.workload) {
+    case Workload::Diffuse: accumulated.add(x, y, trace_path(tracer, scene, ray, rng, rays)); break;
+    case Workload::Camera: accumulated.add(x, y, trace_camera(tracer, scene, ray, rays)); break;
+    case Workload::Nee: accumulated.add(x, y, trace_nee_path(tracer, scene, ray, rng, rays)); break;
+    case Workload::Ao: accumulated.add(x, y, trace_ao(tracer, scene, ray, rng, rays)); break;
+    }
 }
 
 // A frame's sample (FrameSettings::sample_stride > 1): square tiles of kSampleTile pixels a side (neighbours' paths

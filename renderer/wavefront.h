@@ -83,6 +83,7 @@ namespace detail {
 
 struct StreamPath {
     PathState state;
+    NeeState nee;
     Rng rng{0, 0};  // reseeded for its pixel when the path starts
     uint32_t pixel = 0;
 };
@@ -97,13 +98,21 @@ struct Wavefront {
     std::vector<Ray> rays, sorted_rays;
     std::vector<Record> hits, sorted_hits;
     std::vector<uint32_t> keys, order, radix_scratch;
+    // A bounce's any-hit rays (nee's shadow rays, ao's probes) in path order: each ray's path (nee: its place among
+    // the live paths; ao: its pixel), what it adds if it reaches its light (nee), and its answer.
+    std::vector<Ray> shadow_rays;
+    std::vector<uint32_t> shadow_owner;
+    std::vector<Vec3> shadow_gain;
+    std::vector<Record> shadow_hits;
     bool sorted = false;  // whether this bounce's rays are traced from sorted_rays into sorted_hits
     Scratch scratch;
 
     size_t bytes() const {
         return paths.capacity() * sizeof(StreamPath) + (rays.capacity() + sorted_rays.capacity()) * sizeof(Ray) +
                (hits.capacity() + sorted_hits.capacity()) * sizeof(Record) +
-               (keys.capacity() + order.capacity() + radix_scratch.capacity()) * sizeof(uint32_t) + scratch.bytes();
+               (keys.capacity() + order.capacity() + radix_scratch.capacity() + shadow_owner.capacity()) * sizeof(uint32_t) +
+               shadow_rays.capacity() * sizeof(Ray) + shadow_gain.capacity() * sizeof(Vec3) +
+               shadow_hits.capacity() * sizeof(Record) + scratch.bytes();
     }
 
     // The first `live` rays in key order, into sorted_rays. The key's cells divide the box of these rays' origins,
@@ -124,13 +133,20 @@ struct Wavefront {
         for (uint32_t i = 0; i < live; ++i) sorted_rays[i] = rays[order[i]];
     }
 
-    // Every buffer grown to hold `n` paths and written once, so that the first touch of fresh memory (its page faults)
-    // is paid here, once per thread, and not inside a batch whose time the stream chooser measures.
-    void reserve_written(size_t n) {
-        const auto grow = [n](auto& v) {
-            if (v.capacity() < n) v.resize(n), v.clear();
+    // Every buffer grown to hold `n` paths and `shadows` any-hit rays and written once, so that the first touch of
+    // fresh memory (its page faults) is paid here, once per thread, and not inside a batch whose time the stream
+    // chooser measures.
+    void reserve_written(size_t n, size_t shadows) {
+        const auto grow = [](auto& v, size_t size) {
+            if (v.capacity() < size) v.resize(size), v.clear();
         };
-        grow(paths), grow(rays), grow(sorted_rays), grow(hits), grow(sorted_hits), grow(keys), grow(order), grow(radix_scratch);
+        for (auto* v : {&rays, &sorted_rays}) grow(*v, n);
+        for (auto* v : {&hits, &sorted_hits}) grow(*v, n);
+        for (auto* v : {&keys, &order, &radix_scratch}) grow(*v, n);
+        grow(paths, n), grow(shadow_rays, shadows), grow(shadow_owner, shadows), grow(shadow_gain, shadows), grow(shadow_hits, shadows);
+    }
+    void clear_shadows() {
+        shadow_rays.clear(), shadow_owner.clear(), shadow_gain.clear();
     }
 
     // The rays of this bounce in the order they are traced, and where their hits go.
@@ -199,7 +215,7 @@ uint64_t trace_wavefront(const BatchTracer& tracer, const ShadingScene& scene, c
     wf.rays.clear();
     plan.for_each_pixel(b, [&](uint32_t pixel) {
         const int x = int(pixel % uint32_t(w)), y = int(pixel / uint32_t(w));
-        wf.paths.push_back({PathState{}, Rng(uint64_t(y) * uint64_t(w) + uint64_t(x), frame), pixel});
+        wf.paths.push_back({PathState{}, NeeState{}, Rng(uint64_t(y) * uint64_t(w) + uint64_t(x), frame), pixel});
         const float u = wf.paths.back().rng.next_float(), v = wf.paths.back().rng.next_float();
         wf.rays.push_back(camera.generate(x, y, u, v));
     });
@@ -211,22 +227,81 @@ uint64_t trace_wavefront(const BatchTracer& tracer, const ShadingScene& scene, c
         sort_ns += timed_ns([&] { wf.unsort(live); });
         traced += live;
         uint32_t next_live = 0;
+        wf.clear_shadows();
+        const auto finish = [&](uint32_t pixel, const Vec3& radiance) {
+            accumulated.add(int(pixel % uint32_t(w)), int(pixel / uint32_t(w)), radiance);
+        };
         for (uint32_t i = 0; i < live; ++i) {
             prefetch_hit_triangle(scene, wf.hits, i + kShadePrefetch, live);
             StreamPath& path = wf.paths[i];
             Ray next;
             const bool found = wf.hits[i].found();
             const SurfaceHit surface = found ? shading_surface(scene, wf.rays[i], wf.hits[i]) : SurfaceHit{};
-            if (shade_bounce(scene, wf.rays[i], found, surface, depth, path.state, path.rng, next)) {
+            switch (scene.settings.workload) {
+            case Workload::Diffuse:
+                if (shade_bounce(scene, wf.rays[i], found, surface, depth, path.state, path.rng, next)) {
+                    wf.paths[next_live] = path;
+                    wf.rays[next_live++] = next;
+                } else {
+                    finish(path.pixel, path.state.radiance);
+                }
+                break;
+            case Workload::Camera: finish(path.pixel, camera_radiance(scene, wf.rays[i], found, surface)); break;
+            case Workload::Ao: {
+                if (!found) {
+                    finish(path.pixel, Vec3(1.0f));
+                    break;
+                }
+                const Ray base = ao_base(scene, wf.rays[i], surface);
+                for (int k = 0; k < scene.settings.ao_rays; ++k) {
+                    wf.shadow_rays.push_back(ao_probe(base, path.rng));
+                    wf.shadow_owner.push_back(path.pixel);
+                }
+                break;
+            }
+            case Workload::Nee: {
+                std::optional<ShadowRay> shadow;
+                if (!nee_bounce(scene, wf.rays[i], found, surface, depth, path.state, path.nee, path.rng, next, shadow)) {
+                    finish(path.pixel, path.state.radiance);  // no shadow ray: a path casts one only to go on
+                    break;
+                }
+                if (shadow) {
+                    wf.shadow_rays.push_back(shadow->ray);
+                    wf.shadow_owner.push_back(next_live);
+                    wf.shadow_gain.push_back(shadow->contribution);
+                }
                 wf.paths[next_live] = path;
                 wf.rays[next_live++] = next;
-            } else {
-                accumulated.add(int(path.pixel % uint32_t(w)), int(path.pixel / uint32_t(w)), path.state.radiance);
+                break;
+            }
             }
         }
+        traced += trace_shadows(tracer, scene, wf, finish);
         live = next_live;
     }
     return traced;
+}
+
+// A bounce's any-hit rays in one batch: a nee shadow ray that reaches its light adds its gain to its path; ao's
+// probes give their pixel the share that reached nothing. Returns rays traced.
+template <class BatchTracer, class Wavefront, class Finish>
+uint64_t trace_shadows(const BatchTracer& tracer, const ShadingScene& scene, Wavefront& wf, const Finish& finish) {
+    const size_t n = wf.shadow_rays.size();
+    if (n == 0) return 0;
+    wf.shadow_hits.resize(n);
+    tracer.occluded(wf.shadow_rays, wf.shadow_hits, wf.scratch);
+    if (scene.settings.workload == Workload::Nee) {
+        for (size_t k = 0; k < n; ++k)
+            if (!wf.shadow_hits[k].found()) wf.paths[wf.shadow_owner[k]].state.radiance += wf.shadow_gain[k];
+        return n;
+    }
+    const size_t per_pixel = size_t(scene.settings.ao_rays);
+    for (size_t first = 0; first < n; first += per_pixel) {
+        int open = 0;
+        for (size_t k = first; k < first + per_pixel; ++k) open += !wf.shadow_hits[k].found();
+        finish(wf.shadow_owner[first], ao_radiance(open, int(per_pixel)));
+    }
+    return n;
 }
 
 // One batch path by path through the single-ray tracer, in the batch's tile order. Returns rays traced.
@@ -272,7 +347,9 @@ uint64_t render_frame_stream(const BatchTracer& tracer, const SingleTracer& sing
         size_t bytes = 0;
         if (way == StreamChooser::Way::Wavefront) {
             wf = &wavefronts.local();
-            wf->reserve_written(plan.most_paths());
+            const uint64_t paths = plan.most_paths();
+            wf->reserve_written(paths, scene.settings.workload == Workload::Ao ? paths * uint64_t(scene.settings.ao_rays)
+                                       : scene.settings.workload == Workload::Nee ? paths : 0);
             bytes = wf->bytes();
         }
         const uint64_t ns = detail::timed_ns([&] {
