@@ -4,6 +4,7 @@
 #include "experiments/bench.h"
 #include "experiments/build_commit.h"
 #include "experiments/papers/reproduce.h"
+#include "experiments/rays.h"
 #include "experiments/study.h"
 #include "experiments/tradeoff.h"
 #include "renderer/distributed.h"
@@ -91,7 +92,7 @@ int main(int argc, char** argv) {
     app.footer(kExitCodes);
     const std::string command = command_line(argc, argv);
     const std::function<void(CLI::App&)> subcommands[] = {
-        register_render, register_bench, register_study, register_tradeoff, register_accuracy,
+        register_render, register_bench, register_study, register_tradeoff, register_accuracy, register_rays,
         [&](CLI::App& canopy) { register_reproduce(canopy, command); },
     };
     for (const auto& add : subcommands) add(app);

@@ -19,6 +19,7 @@
 #include <tbb/global_control.h>
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <chrono>
 #include <cstdio>
@@ -63,6 +64,10 @@ struct Entry {
     uint64_t counted_rays = 0;
     std::optional<float> rebraid_threshold;  // canopy's rebraid rows
     nlohmann::json builder_params;           // canopy's rows of a named builder: each parameter's value
+    // --rays: the answers that differ from the recorded ones (hit or not; a closest hit on another triangle at
+    // another distance), closest hits on another triangle at the recorded distance (ties), and closest hits on the
+    // recorded triangle at a distance of other bits.
+    uint64_t answers_differ = 0, ties = 0, t_bits_differ = 0;
 
     double build_min() const { return *std::min_element(build_ms.begin(), build_ms.end()); }
     double frame_mean() const { return mean(frame_ms); }
@@ -472,6 +477,34 @@ void render_frames(std::vector<Entry>& entries, const Scene& scene, FlatScene& f
     if (!dynamic) count_visits(entries, shading, camera, o);
 }
 
+// --rays: one untimed pass over the recorded rays, then o.frames timed passes, alternating between entries; each
+// entry's answers counted against the recorded hits.
+void replay_frames(std::vector<Entry>& entries, const std::vector<RecordedRay>& rays, const BenchOptions& o) {
+    std::vector<std::vector<Hit>> hits(entries.size(), std::vector<Hit>(rays.size()));
+    for (Entry& e : entries) e.settings.tracer = e.tracer;
+    for (size_t i = 0; i < entries.size(); ++i) {
+        show_progress(o.scene, entries[i], "warm-up pass", i == 0);
+        replay(*entries[i].accel, entries[i].settings, rays, hits[i]);
+    }
+    for (int frame = 1; frame <= o.frames; ++frame)
+        for (size_t i = 0; i < entries.size(); ++i) {
+            show_progress(o.scene, entries[i], step_of("pass", frame, o.frames), frame == 1 && i == 0);
+            const auto start = Clock::now();
+            replay(*entries[i].accel, entries[i].settings, rays, hits[i]);
+            entries[i].frame_ms.push_back(ms_since(start));
+            entries[i].rays += rays.size();
+        }
+    for (size_t i = 0; i < entries.size(); ++i)
+        for (size_t k = 0; k < rays.size(); ++k) {
+            const Hit &got = hits[i][k], &recorded = rays[k].hit;
+            const bool same_t = std::bit_cast<uint32_t>(got.t) == std::bit_cast<uint32_t>(recorded.t);
+            if (got.found() != recorded.found()) ++entries[i].answers_differ;
+            else if (rays[k].any || !got.found()) continue;
+            else if (got.prim != recorded.prim) ++(same_t ? entries[i].ties : entries[i].answers_differ);
+            else if (!same_t) ++entries[i].t_bits_differ;
+        }
+}
+
 void write_json(const nlohmann::json& j, const std::string& path) {
     if (path.empty()) return;
     std::ofstream out(path);
@@ -571,6 +604,7 @@ struct LoadedScene {
     FlatScene flat;  // a dynamic object moves in it
     double load_ms = 0, flatten_ms = 0;
     MemoryEstimate memory;  // the estimate the scene was admitted with
+    std::optional<std::vector<RecordedRay>> rays;  // --rays
 };
 
 std::shared_ptr<LoadedScene> load_bench_scene(const BenchOptions& o) {
@@ -584,6 +618,7 @@ std::shared_ptr<LoadedScene> load_bench_scene(const BenchOptions& o) {
     start = Clock::now();
     loaded->flat = flatten(loaded->scene);
     loaded->flatten_ms = ms_since(start);
+    if (!o.rays_path.empty()) loaded->rays = read_rays(o.rays_path);
     return loaded;
 }
 
@@ -613,11 +648,23 @@ nlohmann::json bench_static(const BenchOptions& o, LoadedScene& loaded, SceneRep
         if (o.threads.size() > 1) out.printf("\n%s:", threads_text(threads).c_str());
         std::vector<Entry> entries = make_entries(loaded.scene, loaded.flat, o, threads);
         build_all(entries, o.builds, o.scene);
-        render_frames(entries, loaded.scene, loaded.flat, o, nullptr);
+        if (loaded.rays) replay_frames(entries, *loaded.rays, o);
+        else render_frames(entries, loaded.scene, loaded.flat, o, nullptr);
         progress::finish();  // before the table, on stdout
         for (Entry& e : entries) e.report = e.accel->report(o.epo);
         report_static(entries, tris, o.explain, out);
-        for (nlohmann::json& row : results_json(entries, tris)) results.push_back(std::move(row));
+        nlohmann::json rows = results_json(entries, tris);
+        for (size_t i = 0; loaded.rays && i < entries.size(); ++i) {
+            const Entry& e = entries[i];
+            out.printf("%s: of %zu recorded answers, %llu differ (hit or not, or another triangle at another distance), %llu "
+                       "ties (another triangle at the same distance), %llu on the same triangle at another distance\n",
+                       e.label().c_str(), loaded.rays->size(), (unsigned long long)e.answers_differ, (unsigned long long)e.ties,
+                       (unsigned long long)e.t_bits_differ);
+            rows[i]["workload"] = "recorded";
+            rows[i]["replay"] = {{"file", o.rays_path}, {"rays", loaded.rays->size()}, {"answers_differ", e.answers_differ},
+                                 {"ties", e.ties}, {"t_bits_differ", e.t_bits_differ}};
+        }
+        for (nlohmann::json& row : rows) results.push_back(std::move(row));
     }
     return to_json(results, o, tris);
 }
@@ -643,6 +690,11 @@ nlohmann::json bench_scene(const BenchOptions& o, LoadedScene& loaded, SceneRepo
                    "frame; %d frames (mean) after 1 warm-up at rest, threads %s\n",
                    o.width, o.height, o.bounces, o.frames, thread_counts_text(o.threads).c_str());
         return bench_dynamic(o, loaded, *dynamic, out);
+    }
+    if (loaded.rays) {
+        out.printf("replay: %zu rays of %s, %d builds (min), %d passes over them (mean) after 1 warm-up, threads %s\n",
+                   loaded.rays->size(), o.rays_path.c_str(), o.builds, o.frames, thread_counts_text(o.threads).c_str());
+        return bench_static(o, loaded, out);
     }
     out.printf("protocol: %dx%d, workload %s, %d bounces, %d builds (min), %d frames (mean) after 1 warm-up, threads %s%s\n",
                o.width, o.height, workload_text(o.workload).c_str(), o.bounces, o.builds, o.frames, thread_counts_text(o.threads).c_str(),
@@ -712,6 +764,10 @@ void add_protocol_options(CLI::App& bench, BenchCommand& c) {
     bench.add_option("--builds", b.builds, "Builds (minimum reported)")->check(CLI::Range(1, 10000))->capture_default_str();
     bench.add_option("--frames", b.frames, "Timed frames after one warm-up")->check(CLI::Range(1, 10000))->capture_default_str();
     add_workload_options(bench, b.workload);
+    bench.add_option("--rays", b.rays_path,
+                     "Replay a ray file (canopy rays record) instead of rendering frames: each row traces exactly those rays, "
+                     "its answers counted against the recorded hits")
+        ->check(CLI::ExistingFile);
     bench.add_option("--bounces", b.bounces, "Maximum bounces")->check(CLI::Range(0, 1024))->capture_default_str();
     bench.add_option("--json", b.json_path, "Write results as JSON");
     bench.add_flag("!--no-epo", b.epo, "Skip EPO in the report (minutes on millions of triangles)");

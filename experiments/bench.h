@@ -41,6 +41,7 @@ struct BenchOptions {
     int bounces = 8;
     bool material_albedo = false;
     WorkloadOptions workload;  // the rays every row's frames trace
+    std::string rays_path;     // recorded rays (`canopy rays record`) replayed instead of frames; empty: frames
     std::string json_path;
     bool epo = true;  // EPO in the report (exact, slow on millions of triangles)
     // Dynamic-in-static (renderer/dynamic.h): the object that moves every frame ("auto", an index or a name);

@@ -3,6 +3,7 @@
 // (normal, distance, triangle id), as an Embree user's renderer does, never the scene's triangles.
 #include "experiments/embree_accelerator.h"
 
+#include "renderer/frames_of_width.h"
 #include "renderer/wavefront.h"
 
 #include <embree3/rtcore.h>
@@ -118,6 +119,12 @@ struct EmbreeBatchTracer {
     RTCScene scene;
     EmbreeInstances instances;
     bool packets = false;
+    // Closest-hit batches of camera rays alone (--workload camera), in tile order: told coherent, as an Embree user's
+    // primary rays are, where bounces are incoherent.
+    bool coherent = false;
+    RTCIntersectContextFlags closest_flags() const {
+        return coherent ? RTC_INTERSECT_CONTEXT_FLAG_COHERENT : RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
+    }
 
     void closest(std::span<const Ray> rays, std::span<EmbreeRecord> hits, Scratch& scratch) const {
         if (packets) {
@@ -129,7 +136,7 @@ struct EmbreeBatchTracer {
         for (size_t i = 0; i < rays.size(); ++i) to_embree(rays[i], scratch.rays[i]);
         RTCIntersectContext context;
         rtcInitIntersectContext(&context);
-        context.flags = RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
+        context.flags = closest_flags();
         rtcIntersect1M(scene, &context, scratch.rays.data(), unsigned(rays.size()), sizeof(RTCRayHit));
         for (size_t i = 0; i < rays.size(); ++i) hits[i] = record_of(instances, scratch.rays[i]);
     }
@@ -184,7 +191,7 @@ struct EmbreeBatchTracer {
         }
         RTCIntersectContext context;
         rtcInitIntersectContext(&context);
-        context.flags = RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
+        context.flags = closest_flags();
         rtcIntersect16(valid, scene, &context, &p);
         for (size_t i = 0; i < rays.size(); ++i) {
             hits[i] = p.hit.geomID[i] == RTC_INVALID_GEOMETRY_ID
@@ -279,9 +286,38 @@ public:
     uint64_t render(const ShadingScene& scene, const PinholeCamera& camera, uint32_t frame, Image& image,
                     const std::function<void(float)>& on_tile) const override {
         if (scene.settings.tracer == TracerKind::Stream)
-            return render_frame_stream(EmbreeBatchTracer{scene_, instances(), scene.settings.embree_packets},
+            return render_frame_stream(EmbreeBatchTracer{scene_, instances(), scene.settings.embree_packets,
+                                                         scene.settings.workload == Workload::Camera},
                                        EmbreeTracer{scene_, instances()}, scene, camera, frame, image, on_tile);
         return render_frame(EmbreeTracer{scene_, instances()}, scene, camera, frame, image, on_tile);
+    }
+
+    // Recorded rays through rtcIntersect1 and rtcOccluded1, or the stream rows' calls (rtcIntersect1M and rtcOccluded1M,
+    // or their 16-ray packet forms), chunk by chunk.
+    void replay(const FrameSettings& settings, std::span<const RecordedRay> rays, std::span<Hit> hits) const override {
+        const EmbreeTracer single{scene_, instances()};
+        const EmbreeBatchTracer batches{scene_, instances(), settings.embree_packets};
+        tbb::enumerable_thread_specific<EmbreeBatchTracer::Scratch> scratches;
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, rays.size(), kReplayChunk), [&](const tbb::blocked_range<size_t>& range) {
+            const auto chunk = rays.subspan(range.begin(), range.size());
+            const auto out = hits.subspan(range.begin(), range.size());
+            if (settings.tracer == TracerKind::Single) {
+                for (size_t i = 0; i < chunk.size(); ++i) {
+                    out[i] = Hit{};
+                    if (chunk[i].any) out[i].prim = single.occluded(chunk[i].ray) ? 0 : Hit::kNone;
+                    else single.closest(chunk[i].ray, out[i]);
+                }
+                return;
+            }
+            EmbreeBatchTracer::Scratch& scratch = scratches.local();
+            std::vector<EmbreeRecord> records;
+            replay_batches(chunk, out, [&](bool any, std::span<const Ray> batch, std::span<Hit> answers) {
+                records.resize(batch.size());
+                if (any) batches.occluded(batch, records, scratch);
+                else batches.closest(batch, records, scratch);
+                for (size_t k = 0; k < batch.size(); ++k) answers[k] = records[k].found() ? Hit{records[k].t, 0, 0, records[k].prim} : Hit{};
+            });
+        }, tbb::simple_partitioner());
     }
 
     Hit trace(const Ray& ray) const override {

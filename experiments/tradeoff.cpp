@@ -15,6 +15,7 @@
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -54,10 +55,18 @@ struct Curve {
     }
 };
 
+// The workload the reference is rendered with: nee where the curves compare it with diffuse (the same image, with
+// less noise), else the one workload.
+std::string reference_workload(const TradeoffOptions& o) {
+    return std::count(o.workloads.begin(), o.workloads.end(), "nee") ? "nee" : o.workloads.front();
+}
+
 std::string reference_path(const TradeoffOptions& o) {
-    const std::string key = o.scene + "|" + std::to_string(o.width) + "x" + std::to_string(o.height) + "|" +
-                            std::to_string(o.bounces) + "|" + std::to_string(o.reference_spp) + "|" +
-                            std::to_string(o.material_albedo);
+    std::string key = o.scene + "|" + std::to_string(o.width) + "x" + std::to_string(o.height) + "|" +
+                      std::to_string(o.bounces) + "|" + std::to_string(o.reference_spp) + "|" + std::to_string(o.material_albedo);
+    const std::string workload = reference_workload(o);
+    if (workload != "diffuse") key += "|" + workload;  // diffuse references cached before workloads keep their names
+    if (workload == "ao") key += "|" + std::to_string(o.workload.ao_rays) + "|" + std::to_string(o.workload.ao_length);
     char hash[17];
     std::snprintf(hash, sizeof hash, "%016zx", std::hash<std::string>{}(key));
     return o.output + ".reference-" + std::to_string(o.reference_spp) + "spp-" + hash + ".exr";
@@ -100,7 +109,7 @@ std::vector<float> converged_reference(const TradeoffOptions& o, const FlatScene
 }
 
 Curve measure(Accelerator& accel, const TradeoffOptions& o, const ShadingScene& shading, const PinholeCamera& camera,
-              const std::vector<float>& reference) {
+              const std::vector<float>& reference, bool name_workload) {
     Image image(o.width, o.height);
     const std::string what = "tradeoff " + o.scene + ", " +
                              (accel.library() == "embree" ? "embree " + accel.quality() : accel.builder()) + ": ";
@@ -111,6 +120,7 @@ Curve measure(Accelerator& accel, const TradeoffOptions& o, const ShadingScene& 
     double elapsed = seconds_since(start);
     const std::string chosen = accel.chosen().empty() ? "" : "(" + accel.chosen() + ")";  // auto's choice
     Curve curve{accel.library() == "embree" ? "embree " + accel.quality() : accel.builder() + chosen + " " + accel.kernel()};
+    if (name_workload) curve.label += std::string(" ") + workload_name(shading.settings.workload);
     curve.build_ms = 1e3 * elapsed;
     // At least one frame, even when the build alone used the budget: a curve needs a point.
     for (int frame = 1; frame <= o.max_frames && (frame == 1 || elapsed < o.seconds); ++frame) {
@@ -177,10 +187,22 @@ void write_outputs(const std::vector<Curve>& curves, const std::vector<double>& 
     if (!csv) throw std::runtime_error(o.output + ".csv: cannot write");
     std::ofstream json(o.output + ".json");
     json << nlohmann::json{{"scene", o.scene}, {"width", o.width}, {"height", o.height}, {"bounces", o.bounces},
+                           {"workloads", o.workloads}, {"reference_workload", reference_workload(o)},
                            {"reference_spp", o.reference_spp}, {"seconds", o.seconds}, {"results", rows}}.dump(2) << "\n";
     if (!json) throw std::runtime_error(o.output + ".json: cannot write");
     write_plot_png(plot, o.output + ".png");
     std::printf("wrote %s.json, %s.csv, %s.png\n", o.output.c_str(), o.output.c_str(), o.output.c_str());
+}
+
+// Curves of several workloads share one reference: they must converge to one image.
+void check_same_image(const TradeoffOptions& o, const FlatScene& flat) {
+    for (const std::string& w : o.workloads)
+        if (w != "diffuse" && w != "nee")
+            throw std::invalid_argument("--workload " + w + ": converges to an image of its own; several workloads compare "
+                                        "diffuse and nee alone");
+    if (!o.material_albedo || !flat.has_emitters)
+        throw std::invalid_argument("--workload diffuse,nee: nee converges to diffuse's image only with the scene's emitters as "
+                                    "lights (--materials, a scene with emission); under the sky alone it adds a sun");
 }
 
 }  // namespace
@@ -188,9 +210,16 @@ void write_outputs(const std::vector<Curve>& curves, const std::vector<double>& 
 // Under a job of several ranks, they share the reference's samples; the curves, which time one process, are
 // rank 0's alone.
 void run_tradeoff(const TradeoffOptions& o) {
-    FrameSettings settings;
-    settings.width = o.width, settings.height = o.height, settings.max_bounces = o.bounces;
-    settings.material_albedo = o.material_albedo;
+    const auto settings_of = [&](const std::string& workload) {
+        FrameSettings settings;
+        settings.width = o.width, settings.height = o.height, settings.max_bounces = o.bounces;
+        settings.material_albedo = o.material_albedo;
+        WorkloadOptions w = o.workload;
+        w.workload = workload;
+        w.apply(settings);
+        return settings;
+    };
+    const FrameSettings settings = settings_of(o.workloads.front());
     Scene scene;
     FlatScene flat;
     std::vector<std::unique_ptr<Accelerator>> accels;  // made first, so bad names fail before any rendering
@@ -204,17 +233,21 @@ void run_tradeoff(const TradeoffOptions& o) {
         }
         for (const std::string& quality : o.embree_qualities) accels.push_back(make_embree_accelerator(flat, quality, 0));
     });
-    const ShadingScene shading{flat, settings};
+    if (o.workloads.size() > 1) check_same_image(o, flat);
     const PinholeCamera camera(scene_camera(scene, flat), o.width, o.height);
-    const std::vector<float> reference = converged_reference(o, flat, shading, camera);
+    const FrameSettings reference_settings = settings_of(reference_workload(o));
+    const std::vector<float> reference = converged_reference(o, flat, ShadingScene{flat, reference_settings}, camera);
     if (!distributed::is_root()) return;
 
+    std::vector<FrameSettings> workload_settings;
+    for (const std::string& workload : o.workloads) workload_settings.push_back(settings_of(workload));
     std::vector<Curve> curves;
-    for (const auto& accel : accels) {
-        curves.push_back(measure(*accel, o, shading, camera, reference));
+    for (const auto& accel : accels)
+        for (const FrameSettings& s : workload_settings) {
+        curves.push_back(measure(*accel, o, ShadingScene{flat, s}, camera, reference, o.workloads.size() > 1));
         std::printf("%-22s %d frames in %.2f s, RMSE %.5f\n", curves.back().label.c_str(), curves.back().samples.back().frames,
                     curves.back().samples.back().seconds, curves.back().samples.back().rmse);
-    }
+        }
     const std::vector<double> levels = error_levels(curves);
     print_table(curves, levels);
     write_outputs(curves, levels, o);
@@ -243,6 +276,13 @@ void register_tradeoff(CLI::App& canopy) {
     tradeoff->add_option("--reference-spp", tr.reference_spp, "Samples of the cached reference")->check(CLI::Range(1, 1 << 20))->capture_default_str();
     tradeoff->add_option("--size", p->size, "Width and height")->expected(2)->check(CLI::Range(1, 16384))->capture_default_str();
     tradeoff->add_option("--bounces", tr.bounces, "Maximum bounces")->check(CLI::Range(0, 1024))->capture_default_str();
+    tradeoff->add_option("--workload", tr.workloads, std::string(kWorkloadHelp) + "; a curve each")
+        ->delimiter(',')
+        ->check(CLI::IsMember({"diffuse", "camera", "nee", "ao"}))
+        ->capture_default_str();
+    tradeoff->add_option("--ao-rays", tr.workload.ao_rays, "ao: occlusion rays from each camera hit")->check(CLI::Range(1, 1024));
+    tradeoff->add_option("--ao-length", tr.workload.ao_length, "ao: their length (default: a tenth of the scene box's diagonal)")
+        ->check(CLI::PositiveNumber);
     tradeoff->add_flag("--materials", tr.material_albedo, "Use the materials: Kd or baseColorFactor as albedo, Ke or emissiveFactor as light");
     tradeoff->add_option("-o,--output", tr.output, "Output stem: STEM.json, STEM.csv, STEM.png, cached reference beside")->capture_default_str();
     tradeoff->add_option("--threads", p->threads, "Threads for every library (0: all)")->check(CLI::Range(0, 4096));

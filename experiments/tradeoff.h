@@ -16,6 +16,10 @@ struct TradeoffOptions {
     int width = 512, height = 384;
     int bounces = 8;
     bool material_albedo = false;
+    // A curve per accelerator and workload. Several workloads must converge to one image (diffuse and nee with the
+    // scene's emitters as lights, under --materials); the reference is then nee's.
+    std::vector<std::string> workloads{"diffuse"};
+    WorkloadOptions workload;  // ao's rays and length
     std::string output = "tradeoff";  // writes OUTPUT.json, OUTPUT.csv, OUTPUT.png and the cached reference beside them
 };
 

@@ -30,6 +30,17 @@ uint64_t render(const Accelerator& accel, const ShadingScene& scene, const Pinho
     }
 }
 
+void replay(const Accelerator& accel, const FrameSettings& settings, std::span<const RecordedRay> rays, std::span<Hit> hits) {
+    const AnyKernel kernel = accel.bound_kernel();
+    switch (kernel_width_of(kernel)) {
+        case 0: return foreign_frames(accel).replay(settings, rays, hits);
+        case 1: return replay_of_width<1>(kernel, settings, rays, hits);
+        case 2: return replay_of_width<2>(kernel, settings, rays, hits);
+        case 4: return replay_of_width<4>(kernel, settings, rays, hits);
+        default: return replay_of_width<8>(kernel, settings, rays, hits);
+    }
+}
+
 std::pair<TraversalCounts, uint64_t> count_frame(const Accelerator& accel, const ShadingScene& scene,
                                                  const PinholeCamera& camera, uint32_t frame) {
     tbb::enumerable_thread_specific<TraversalCounts> counts;

@@ -3,8 +3,10 @@
 // per frame by its type, or handed to an accelerator of another library that traces frames its own way.
 #include "engine/accelerator.h"
 #include "renderer/path_tracer.h"
+#include "renderer/ray_file.h"
 
 #include <functional>
+#include <span>
 #include <utility>
 
 namespace canopy {
@@ -16,7 +18,15 @@ public:
     virtual ~ForeignFrames() = default;
     virtual uint64_t render(const ShadingScene& scene, const PinholeCamera& camera, uint32_t frame, Image& image,
                             const std::function<void(float)>& on_tile) const = 0;
+    virtual void replay(const FrameSettings& settings, std::span<const RecordedRay> rays, std::span<Hit> hits) const = 0;
 };
+
+// Recorded rays (`bench --rays`) traced again by `accel` on every thread, their hits into `hits` (an any-hit query's
+// hit is found or not): one at a time (TracerKind::Single) or in batches of one query kind (Stream: canopy's batch
+// kernel, Embree's stream or packet calls), chunk by chunk in the recorded order.
+void replay(const Accelerator& accel, const FrameSettings& settings, std::span<const RecordedRay> rays, std::span<Hit> hits);
+// Rays recorded and replayed are traced in chunks of this many, each chunk on one thread.
+constexpr size_t kReplayChunk = 4096;
 
 // Renders frame `frame` of `accel` into `image` (the single or stream tracer, as scene.settings says). Returns rays
 // traced. Throws std::invalid_argument for a compressed layout and the stream tracer.

@@ -5,5 +5,6 @@ namespace canopy {
 
 template uint64_t render_of_width<8>(const AnyKernel&, const FrameJob&);
 template uint64_t count_of_width<8>(const AnyKernel&, const FrameJob&, tbb::enumerable_thread_specific<TraversalCounts>&);
+template void replay_of_width<8>(const AnyKernel&, const FrameSettings&, std::span<const RecordedRay>, std::span<Hit>);
 
 }  // namespace canopy

@@ -3,10 +3,13 @@
 // (frames_bvh2.cpp, frames_bvh4.cpp, frames_bvh8.cpp; the kd-tree's with width 1), so that no one file compiles every
 // kernel's frames.
 #include "kernels/dispatch.h"
+#include "renderer/frames.h"
 #include "renderer/path_tracer.h"
 #include "renderer/wavefront.h"
 
+#include <tbb/blocked_range.h>
 #include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
 
 #include <stdexcept>
 #include <variant>
@@ -93,6 +96,46 @@ uint64_t count_of_width(const AnyKernel& kernel, const FrameJob& job, tbb::enume
     });
 }
 
+// A chunk's rays of one query kind, gathered for a batch call, and their hits scattered back.
+template <class Trace>
+void replay_batches(std::span<const RecordedRay> rays, std::span<Hit> hits, Trace&& trace) {
+    std::vector<Ray> batch;
+    std::vector<Hit> answers;
+    std::vector<uint32_t> index;
+    for (const bool any : {false, true}) {
+        batch.clear(), index.clear();
+        for (uint32_t i = 0; i < rays.size(); ++i)
+            if (rays[i].any == any) batch.push_back(rays[i].ray), index.push_back(i);
+        answers.resize(batch.size());
+        trace(any, std::span<const Ray>(batch), std::span<Hit>(answers));
+        for (size_t k = 0; k < index.size(); ++k) hits[index[k]] = answers[k];
+    }
+}
+
+template <int N>
+void replay_of_width(const AnyKernel& kernel, const FrameSettings& settings, std::span<const RecordedRay> rays, std::span<Hit> hits) {
+    with_kernel_of_width<N>(kernel, [&]<class Kernel>(const Kernel& k) -> uint64_t {
+        tbb::enumerable_thread_specific<typename Kernel::Scratch> scratches;
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, rays.size(), kReplayChunk), [&](const tbb::blocked_range<size_t>& range) {
+            const auto chunk = rays.subspan(range.begin(), range.size());
+            const auto out = hits.subspan(range.begin(), range.size());
+            if (settings.tracer == TracerKind::Single) {
+                for (size_t i = 0; i < chunk.size(); ++i) {
+                    if (chunk[i].any) k.template query<Query::Any>(chunk[i].ray, out[i]);
+                    else k.template query<Query::Closest>(chunk[i].ray, out[i]);
+                }
+                return;
+            }
+            typename Kernel::Scratch& scratch = scratches.local();
+            replay_batches(chunk, out, [&](bool any, std::span<const Ray> batch, std::span<Hit> answers) {
+                if (any) k.template batch<Query::Any>(batch, answers, scratch, settings.batch_traversal);
+                else k.template batch<Query::Closest>(batch, answers, scratch, settings.batch_traversal);
+            });
+        }, tbb::simple_partitioner());
+        return 0;
+    });
+}
+
 extern template uint64_t render_of_width<1>(const AnyKernel&, const FrameJob&);
 extern template uint64_t render_of_width<2>(const AnyKernel&, const FrameJob&);
 extern template uint64_t render_of_width<4>(const AnyKernel&, const FrameJob&);
@@ -101,5 +144,9 @@ extern template uint64_t count_of_width<1>(const AnyKernel&, const FrameJob&, tb
 extern template uint64_t count_of_width<2>(const AnyKernel&, const FrameJob&, tbb::enumerable_thread_specific<TraversalCounts>&);
 extern template uint64_t count_of_width<4>(const AnyKernel&, const FrameJob&, tbb::enumerable_thread_specific<TraversalCounts>&);
 extern template uint64_t count_of_width<8>(const AnyKernel&, const FrameJob&, tbb::enumerable_thread_specific<TraversalCounts>&);
+extern template void replay_of_width<1>(const AnyKernel&, const FrameSettings&, std::span<const RecordedRay>, std::span<Hit>);
+extern template void replay_of_width<2>(const AnyKernel&, const FrameSettings&, std::span<const RecordedRay>, std::span<Hit>);
+extern template void replay_of_width<4>(const AnyKernel&, const FrameSettings&, std::span<const RecordedRay>, std::span<Hit>);
+extern template void replay_of_width<8>(const AnyKernel&, const FrameSettings&, std::span<const RecordedRay>, std::span<Hit>);
 
 }  // namespace canopy

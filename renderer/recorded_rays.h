@@ -4,6 +4,7 @@
 #include "renderer/frames.h"
 #include "renderer/camera.h"
 #include "renderer/path_tracer.h"
+#include "renderer/ray_file.h"
 
 #include <chrono>
 #include <vector>
@@ -20,6 +21,36 @@ struct RecordingTracer {
         return hit.found();
     }
 };
+
+// Records every ray a workload's frame asks of a canopy accelerator, with the hit it answers.
+struct WorkloadRecorder {
+    const Accelerator& accel;
+    std::vector<RecordedRay>& rays;
+    bool closest(const Ray& ray, Hit& hit) const {
+        hit = accel.trace(ray);
+        rays.push_back({ray, false, hit});
+        return hit.found();
+    }
+    bool occluded(const Ray& ray) const {
+        Hit hit;
+        accel.trace_batch(Query::Any, {&ray, 1}, {&hit, 1});
+        rays.push_back({ray, true, hit});
+        return hit.found();
+    }
+};
+
+// Every ray of frame `frame` of the workload scene.settings names, pixel by pixel on one thread so that their order
+// is fixed, as a live frame traces them: what `canopy rays record` writes.
+inline std::vector<RecordedRay> record_frame(const Accelerator& accel, const ShadingScene& scene, const PinholeCamera& camera,
+                                             uint32_t frame) {
+    std::vector<RecordedRay> rays;
+    const WorkloadRecorder recorder{accel, rays};
+    Image unused(scene.settings.width, scene.settings.height);
+    uint64_t count = 0;
+    for (int y = 0; y < scene.settings.height; ++y)
+        for (int x = 0; x < scene.settings.width; ++x) trace_pixel(recorder, scene, camera, frame, x, y, unused, count);
+    return rays;
+}
 
 // The diffuse rays of one protocol frame (sample 0), traced single-threaded so their order is fixed.
 inline std::vector<Ray> diffuse_rays(const Accelerator& reference, const FlatScene& flat, const PinholeCamera& camera, int w, int h) {
