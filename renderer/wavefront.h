@@ -104,6 +104,8 @@ struct Wavefront {
     std::vector<uint32_t> shadow_owner;
     std::vector<Vec3> shadow_gain;
     std::vector<Record> shadow_hits;
+    std::vector<Ray> sorted_shadow_rays;  // the any-hit rays in key order, and their answers
+    std::vector<Record> sorted_shadow_hits;
     bool sorted = false;  // whether this bounce's rays are traced from sorted_rays into sorted_hits
     Scratch scratch;
 
@@ -111,26 +113,29 @@ struct Wavefront {
         return paths.capacity() * sizeof(StreamPath) + (rays.capacity() + sorted_rays.capacity()) * sizeof(Ray) +
                (hits.capacity() + sorted_hits.capacity()) * sizeof(Record) +
                (keys.capacity() + order.capacity() + radix_scratch.capacity() + shadow_owner.capacity()) * sizeof(uint32_t) +
-               shadow_rays.capacity() * sizeof(Ray) + shadow_gain.capacity() * sizeof(Vec3) +
-               shadow_hits.capacity() * sizeof(Record) + scratch.bytes();
+               (shadow_rays.capacity() + sorted_shadow_rays.capacity()) * sizeof(Ray) + shadow_gain.capacity() * sizeof(Vec3) +
+               (shadow_hits.capacity() + sorted_shadow_hits.capacity()) * sizeof(Record) + scratch.bytes();
     }
 
     // The first `live` rays in key order, into sorted_rays. The key's cells divide the box of these rays' origins,
     // not the scene's: a view of a small part of a large scene still sorts its rays into many cells. Rays from one
     // point (a pinhole camera's) stay in pixel order: their runs of neighbouring pixels are coherent packets already,
     // and a key of octant alone would only pay a full sort to pull the runs apart.
-    void sort(uint32_t live) {
+    void sort(uint32_t live) { sorted = sort_rays({rays.data(), live}, sorted_rays); }
+
+    // `from` in key order into `to`, the order kept in `order`; false, with nothing written, for rays of one origin.
+    bool sort_rays(std::span<const Ray> from, std::vector<Ray>& to) {
         BBox origins;
-        for (uint32_t i = 0; i < live; ++i)
-            if (std::isfinite(rays[i].org.x) && std::isfinite(rays[i].org.y) && std::isfinite(rays[i].org.z)) origins.extend(rays[i].org);
-        sorted = origins.lower != origins.upper;
-        if (!sorted) return;
+        for (const Ray& r : from)
+            if (std::isfinite(r.org.x) && std::isfinite(r.org.y) && std::isfinite(r.org.z)) origins.extend(r.org);
+        if (origins.lower == origins.upper) return false;
         const RayOrderKey key(origins);
-        keys.resize(live);
-        for (uint32_t i = 0; i < live; ++i) keys[i] = key(rays[i]);
+        keys.resize(from.size());
+        for (size_t i = 0; i < from.size(); ++i) keys[i] = key(from[i]);
         radix_order(keys, order, radix_scratch);
-        sorted_rays.resize(live);
-        for (uint32_t i = 0; i < live; ++i) sorted_rays[i] = rays[order[i]];
+        to.resize(from.size());
+        for (size_t i = 0; i < from.size(); ++i) to[i] = from[order[i]];
+        return true;
     }
 
     // Every buffer grown to hold `n` paths and `shadows` any-hit rays and written once, so that the first touch of
@@ -142,8 +147,10 @@ struct Wavefront {
         };
         for (auto* v : {&rays, &sorted_rays}) grow(*v, n);
         for (auto* v : {&hits, &sorted_hits}) grow(*v, n);
-        for (auto* v : {&keys, &order, &radix_scratch}) grow(*v, n);
-        grow(paths, n), grow(shadow_rays, shadows), grow(shadow_owner, shadows), grow(shadow_gain, shadows), grow(shadow_hits, shadows);
+        for (auto* v : {&keys, &order, &radix_scratch}) grow(*v, std::max(n, shadows));
+        grow(paths, n), grow(shadow_owner, shadows), grow(shadow_gain, shadows);
+        for (auto* v : {&shadow_rays, &sorted_shadow_rays}) grow(*v, shadows);
+        for (auto* v : {&shadow_hits, &sorted_shadow_hits}) grow(*v, shadows);
     }
     void clear_shadows() {
         shadow_rays.clear(), shadow_owner.clear(), shadow_gain.clear();
@@ -289,7 +296,16 @@ uint64_t trace_shadows(const BatchTracer& tracer, const ShadingScene& scene, Wav
     const size_t n = wf.shadow_rays.size();
     if (n == 0) return 0;
     wf.shadow_hits.resize(n);
-    tracer.occluded(wf.shadow_rays, wf.shadow_hits, wf.scratch);
+    // nee's shadow rays leave the bounce's scattered hit points: sorted, they form coherent packets. ao's probes,
+    // a pixel's few from one point in pixel order, traced as fast unsorted, and Embree's stream call slower sorted
+    // (docs/results.md#workloads-against-embrees-best-call).
+    if (scene.settings.workload == Workload::Nee && wf.sort_rays(wf.shadow_rays, wf.sorted_shadow_rays)) {
+        wf.sorted_shadow_hits.resize(n);
+        tracer.occluded(wf.sorted_shadow_rays, wf.sorted_shadow_hits, wf.scratch);
+        for (size_t i = 0; i < n; ++i) wf.shadow_hits[wf.order[i]] = wf.sorted_shadow_hits[i];
+    } else {
+        tracer.occluded(wf.shadow_rays, wf.shadow_hits, wf.scratch);
+    }
     if (scene.settings.workload == Workload::Nee) {
         for (size_t k = 0; k < n; ++k)
             if (!wf.shadow_hits[k].found()) wf.paths[wf.shadow_owner[k]].state.radiance += wf.shadow_gain[k];
