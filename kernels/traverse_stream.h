@@ -56,14 +56,44 @@ struct StreamScratch {
     std::vector<Entry> lists;  // the ray lists of the frames on `frames`, a stack of regions
     std::vector<Tested> tested;
     std::vector<Frame> frames;
+    // Packets: a batch whose octant runs are too short for packets, grouped by octant, and where each ray came from.
+    std::vector<Ray> grouped;
+    std::vector<Hit> grouped_hits;
+    std::vector<uint32_t> order;
 
     size_t bytes() const {
         return slabs.capacity() * sizeof(slabs[0]) + tmin.capacity() * sizeof(float) + lists.capacity() * sizeof(Entry) +
-               tested.capacity() * sizeof(Tested) + frames.capacity() * sizeof(Frame);
+               tested.capacity() * sizeof(Tested) + frames.capacity() * sizeof(Frame) + grouped.capacity() * sizeof(Ray) +
+               grouped_hits.capacity() * sizeof(Hit) + order.capacity() * sizeof(uint32_t);
     }
 };
 
 namespace detail {
+
+// Whether most of a batch's rays lie in runs of one octant shorter than a packet takes (kPacketSwitch).
+inline bool short_octant_runs(std::span<const Ray> rays) {
+    constexpr size_t kWorthGrouping = 64;  // below, a batch's packets are few either way
+    if (rays.size() < kWorthGrouping) return false;
+    size_t in_short = 0, first = 0;
+    for (size_t i = 1; i <= rays.size(); ++i)
+        if (i == rays.size() || octant(rays[i]) != octant(rays[first])) {
+            if (i - first < size_t(kPacketSwitch)) in_short += i - first;
+            first = i;
+        }
+    return 2 * in_short > rays.size();
+}
+
+// `rays` into `grouped` by octant, each octant's rays in their order (a stable counting sort); grouped[i] is
+// rays[order[i]].
+inline void group_by_octant(std::span<const Ray> rays, std::vector<Ray>& grouped, std::vector<uint32_t>& order) {
+    std::array<uint32_t, 9> start{};
+    for (const Ray& r : rays) ++start[octant(r) + 1];
+    for (size_t o = 1; o < start.size(); ++o) start[o] += start[o - 1];
+    order.resize(rays.size());
+    for (size_t i = 0; i < rays.size(); ++i) order[start[octant(rays[i])]++] = uint32_t(i);
+    grouped.resize(rays.size());
+    for (size_t i = 0; i < rays.size(); ++i) grouped[i] = rays[order[i]];
+}
 
 template <int N>
 [[gnu::always_inline]] inline auto node_tmin(float tmin) {
@@ -193,8 +223,16 @@ template <Query Q, bool Robust = true, class TriangleTest = WatertightRay, int N
                                       StreamScratch<N>& scratch, BatchTraversal how = BatchTraversal::Single,
                                       Counter&& counter = {}) {
     if (how == BatchTraversal::Single) return detail::trace_each<Q, Robust, TriangleTest>(bvh, rays, hits, counter);
-    if (how == BatchTraversal::Packet)
-        return traverse_packets<Q, Robust, TriangleTest>(bvh, rays, hits, counter);
+    if (how == BatchTraversal::Packet) {
+        if (!detail::short_octant_runs(rays)) return traverse_packets<Q, Robust, TriangleTest>(bvh, rays, hits, counter);
+        // Rays in octant runs too short for a packet (ambient-occlusion probes, a few a point in pixel order) go to
+        // the packets grouped by octant, each octant's in their order (docs/results.md#workloads-against-embrees-best-call).
+        detail::group_by_octant(rays, scratch.grouped, scratch.order);
+        scratch.grouped_hits.resize(rays.size());
+        traverse_packets<Q, Robust, TriangleTest>(bvh, std::span<const Ray>(scratch.grouped), std::span<Hit>(scratch.grouped_hits), counter);
+        for (size_t i = 0; i < rays.size(); ++i) hits[scratch.order[i]] = scratch.grouped_hits[i];
+        return;
+    }
     for (size_t i = 0; i < rays.size(); ++i) {
         hits[i] = Hit{};
         hits[i].t = rays[i].tmax;
