@@ -49,7 +49,7 @@ if "$canopy" tradeoff "gen:box?tris=500" --builder auto --seconds 0.05 --referen
     | grep -qE 'auto\([a-z-]+\) bvh'; then pass "tradeoff --builder auto names its choice"; else fail "tradeoff --builder auto names its choice"; fi
 rm -f "$work"/t.*
 if "$canopy" --version | grep -qE '^canopy [0-9.]+'; then pass "canopy --version"; else fail "canopy --version"; fi
-expect "canopy dynamic, a helper's name" 2 "unknown command 'dynamic'; the commands are render, bench, study, tradeoff, accuracy, reproduce (dynamic: bench --dynamic)" "$canopy" dynamic
+expect "canopy dynamic, a helper's name" 2 "unknown command 'dynamic'; the commands are render, bench, study, tradeoff, accuracy, rays, reproduce (dynamic: bench --dynamic)" "$canopy" dynamic
 
 # 4. The memory guard: a negative limit is refused; images count in the estimate.
 expect "--memory-limit -5" 2 "--memory-limit" "$canopy" render "gen:box?tris=100" --memory-limit -5 -o "$work/x.exr"
