@@ -27,6 +27,28 @@ Hit brute_force_closest(std::span<const Triangle> tris, const Ray& ray) {
     return hit;
 }
 
+// A path tracer's tracer that answers by brute force, so that a test of shading depends on shading alone; its any
+// hit is a closest hit within the ray's interval.
+struct BruteForceTracer {
+    std::span<const Triangle> triangles;
+    bool closest(const Ray& ray, Hit& hit) const {
+        hit = brute_force_closest(triangles, ray);
+        return hit.found();
+    }
+};
+
+// The inside of the cube [-1, 1]^3 in 12 triangles, two a face: -z, +z, -y, +y, -x, +x.
+inline std::vector<Triangle> cube_inside() {
+    const Vec3 p[8] = {{-1, -1, -1}, {1, -1, -1}, {1, 1, -1}, {-1, 1, -1}, {-1, -1, 1}, {1, -1, 1}, {1, 1, 1}, {-1, 1, 1}};
+    const int faces[6][4] = {{0, 1, 2, 3}, {4, 5, 6, 7}, {0, 1, 5, 4}, {3, 2, 6, 7}, {0, 3, 7, 4}, {1, 2, 6, 5}};
+    std::vector<Triangle> triangles;
+    for (const auto& f : faces) {
+        triangles.push_back({p[f[0]], p[f[1]], p[f[2]]});
+        triangles.push_back({p[f[0]], p[f[2]], p[f[3]]});
+    }
+    return triangles;
+}
+
 template <class TriangleTest = WatertightRay>
 std::vector<Hit> brute_force_all(std::span<const Triangle> tris, const std::vector<Ray>& rays) {
     std::vector<Hit> hits(rays.size());

@@ -76,14 +76,6 @@ void check_against_brute_force(const Scene& scene, const std::string& spec) {
     }
 }
 
-struct BruteForceTracer {
-    std::span<const Triangle> triangles;
-    bool closest(const Ray& ray, Hit& hit) const {
-        hit = brute_force_closest(triangles, ray);
-        return hit.found();
-    }
-};
-
 // One frame of 48x36 pixels with one bounce, so a moved object changes what primary rays hit and shade.
 std::vector<float> frame_image(const auto& tracer, const Scene& scene, const FlatScene& flat, uint32_t frame) {
     FrameSettings settings;

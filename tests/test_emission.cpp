@@ -8,15 +8,6 @@ using namespace canopy::test;
 
 namespace {
 
-// Traces by brute force, so that the test depends on shading alone.
-struct BruteForceTracer {
-    const std::vector<Triangle>& triangles;
-    bool closest(const Ray& ray, Hit& hit) const {
-        hit = brute_force_closest(triangles, ray);
-        return hit.found();
-    }
-};
-
 // A lamp: a square facing the camera that fills its whole view, with nothing behind the camera.
 FlatScene lamp_filling_the_view(const Vec3& kd, const Vec3& emission) {
     FlatScene flat;

@@ -165,13 +165,7 @@ TEST_CASE("an empty sky gives one ray per path and radiance 1", "[render]") {
 
 TEST_CASE("a closed room gives max_bounces + 1 rays per path and no light", "[render]") {
     FlatScene flat;
-    // The inside of a cube made of 12 triangles.
-    const Vec3 p[8] = {{-1, -1, -1}, {1, -1, -1}, {1, 1, -1}, {-1, 1, -1}, {-1, -1, 1}, {1, -1, 1}, {1, 1, 1}, {-1, 1, 1}};
-    const int faces[6][4] = {{0, 1, 2, 3}, {4, 5, 6, 7}, {0, 1, 5, 4}, {3, 2, 6, 7}, {0, 3, 7, 4}, {1, 2, 6, 5}};
-    for (const auto& f : faces) {
-        flat.triangles.push_back({p[f[0]], p[f[1]], p[f[2]]});
-        flat.triangles.push_back({p[f[0]], p[f[2]], p[f[3]]});
-    }
+    flat.triangles = cube_inside();
     const Camera cam{{0, 0, 0}, {0, 0, -1}, {0, 1, 0}, 60.0f};
     const auto accel = built(make_canopy_accelerator(flat, {}));
     const Rendered r = render_once(*accel, flat, cam, 16, 16, 8);

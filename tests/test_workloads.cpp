@@ -12,15 +12,6 @@ using namespace canopy::test;
 
 namespace {
 
-// Traces by brute force, so that a test depends on shading alone; any hit is a closest hit within the interval.
-struct BruteForceTracer {
-    const std::vector<Triangle>& triangles;
-    bool closest(const Ray& ray, Hit& hit) const {
-        hit = brute_force_closest(triangles, ray);
-        return hit.found();
-    }
-};
-
 FlatScene with_bounds(FlatScene flat, const Vec3& kd = Vec3(0.8f)) {
     flat.materials = {{"grey", kd, Vec3(0.0f)}};
     flat.material.assign(flat.triangles.size(), 0);
@@ -39,12 +30,7 @@ FlatScene floor_under_sky(float half) {
 // The inside of the cube [-1, 1]^3, closed on every side.
 FlatScene closed_room() {
     FlatScene flat;
-    const Vec3 p[8] = {{-1, -1, -1}, {1, -1, -1}, {1, 1, -1}, {-1, 1, -1}, {-1, -1, 1}, {1, -1, 1}, {1, 1, 1}, {-1, 1, 1}};
-    const int faces[6][4] = {{0, 1, 2, 3}, {4, 5, 6, 7}, {0, 1, 5, 4}, {3, 2, 6, 7}, {0, 3, 7, 4}, {1, 2, 6, 5}};
-    for (const auto& f : faces) {
-        flat.triangles.push_back({p[f[0]], p[f[1]], p[f[2]]});
-        flat.triangles.push_back({p[f[0]], p[f[2]], p[f[3]]});
-    }
+    flat.triangles = cube_inside();
     return with_bounds(flat);
 }
 
@@ -74,22 +60,17 @@ struct Frame {
     double mean = 0;
 };
 
-template <class Tracer>
-Frame render_tracer(const Tracer& tracer, const FlatScene& flat, const FrameSettings& s, const Camera& camera, int frames = 1) {
+// Frames 0, 1, ... of a tracer (through render_frame) or of an accelerator (through render, the tracer it names).
+template <class TracerOrAccelerator>
+Frame render_with(const TracerOrAccelerator& what, const FlatScene& flat, const FrameSettings& s, const Camera& camera, int frames = 1) {
     const ShadingScene shading{flat, s};
+    const PinholeCamera pinhole(camera, s.width, s.height);
     Image image(s.width, s.height);
     Frame f;
-    for (int k = 0; k < frames; ++k) f.rays += render_frame(tracer, shading, PinholeCamera(camera, s.width, s.height), uint32_t(k), image);
-    f.pixels = image.average(frames);
-    f.mean = image.mean(frames);
-    return f;
-}
-
-Frame render_accel(const Accelerator& accel, const FlatScene& flat, const FrameSettings& s, const Camera& camera, int frames = 1) {
-    const ShadingScene shading{flat, s};
-    Image image(s.width, s.height);
-    Frame f;
-    for (int k = 0; k < frames; ++k) f.rays += render(accel, shading, PinholeCamera(camera, s.width, s.height), uint32_t(k), image);
+    for (int k = 0; k < frames; ++k) {
+        if constexpr (std::is_base_of_v<Accelerator, TracerOrAccelerator>) f.rays += render(what, shading, pinhole, uint32_t(k), image);
+        else f.rays += render_frame(what, shading, pinhole, uint32_t(k), image);
+    }
     f.pixels = image.average(frames);
     f.mean = image.mean(frames);
     return f;
@@ -115,7 +96,7 @@ TEST_CASE("workloads are named on the command line, and an unknown name is refus
 TEST_CASE("camera: the albedo times the cosine to the ray, and the sky where the ray misses", "[render][workload]") {
     const FlatScene floor = floor_under_sky(2.0f);
     const FrameSettings s = settings_of(Workload::Camera, 8, 6);
-    const Frame f = render_tracer(BruteForceTracer{floor.triangles}, floor, s, kLookingDown);
+    const Frame f = render_with(BruteForceTracer{floor.triangles}, floor, s, kLookingDown);
     CHECK(f.rays == 48u);
     const ShadingScene shading{floor, s};
     const PinholeCamera camera(kLookingDown, s.width, s.height);
@@ -134,16 +115,16 @@ TEST_CASE("ao: nothing above an open floor occludes, a closed room occludes ever
     const FlatScene floor = floor_under_sky(100.0f);
     FrameSettings s = settings_of(Workload::Ao, 8, 6);
     s.ao_rays = 7;
-    const Frame open = render_tracer(BruteForceTracer{floor.triangles}, floor, s, kLookingDown);
+    const Frame open = render_with(BruteForceTracer{floor.triangles}, floor, s, kLookingDown);
     for (float p : open.pixels) CHECK(p == 1.0f);
     CHECK(open.rays == 48u * 8u);  // every camera ray hits the floor: 7 probes each
 
     const FlatScene room = closed_room();
     s.ao_length = 10.0f;
-    const Frame closed = render_tracer(BruteForceTracer{room.triangles}, room, s, kInTheRoom);
+    const Frame closed = render_with(BruteForceTracer{room.triangles}, room, s, kInTheRoom);
     for (float p : closed.pixels) CHECK(p == 0.0f);
     s.ao_length = 1e-3f;  // shorter than any hit point's distance to another wall
-    const Frame short_rays = render_tracer(BruteForceTracer{room.triangles}, room, s, kInTheRoom);
+    const Frame short_rays = render_with(BruteForceTracer{room.triangles}, room, s, kInTheRoom);
     for (float p : short_rays.pixels) CHECK(p == 1.0f);
     // The default length is a tenth of the scene box's diagonal.
     CHECK(ShadingScene{room, settings_of(Workload::Ao, 1, 1)}.ao_length == Approx(0.1f * std::sqrt(12.0f)));
@@ -153,10 +134,10 @@ TEST_CASE("nee: a floor under the sky and the sun reflects the albedo times both
     // Radiance from a Lambertian floor: albedo / pi x (the sky's pi + the sun's pi cos(theta)).
     const FlatScene floor = floor_under_sky(1e4f);
     const float expected = 0.8f * (1.0f + Lights::sun_direction().y);
-    const Frame nee = render_tracer(BruteForceTracer{floor.triangles}, floor, settings_of(Workload::Nee, 8, 6, 1), kLookingDown, 16);
+    const Frame nee = render_with(BruteForceTracer{floor.triangles}, floor, settings_of(Workload::Nee, 8, 6, 1), kLookingDown, 16);
     for (size_t i = 0; i < nee.pixels.size(); ++i) CHECK(nee.pixels[i] == Approx(expected).epsilon(1e-3));
     // Without a bounce there is no light sample either, as under diffuse: the floor is black.
-    const Frame last = render_tracer(BruteForceTracer{floor.triangles}, floor, settings_of(Workload::Nee, 8, 6, 0), kLookingDown);
+    const Frame last = render_with(BruteForceTracer{floor.triangles}, floor, settings_of(Workload::Nee, 8, 6, 0), kLookingDown);
     for (float p : last.pixels) CHECK(p == 0.0f);
 }
 
@@ -225,21 +206,21 @@ TEST_CASE("every workload through canopy's kernels answers as brute force does",
     const Camera camera = scene_camera(scene, flat);
     for (Workload w : {Workload::Camera, Workload::Ao, Workload::Nee}) {
         FrameSettings s = settings_of(w, 24, 18);
-        const Frame expected = render_tracer(BruteForceTracer{flat.triangles}, flat, s, camera);
+        const Frame expected = render_with(BruteForceTracer{flat.triangles}, flat, s, camera);
         for (const char* kernel : {"bvh2", "bvh4", "bvh8"})
             for (const char* toplevel : {"flat", "two-level"}) {
                 CanopyOptions options;
                 options.kernel = kernel, options.toplevel = toplevel;
                 const auto accel = built(make_canopy_accelerator(scene, flat, options));
                 INFO(workload_name(w) << " " << kernel << " " << toplevel);
-                const Frame got = render_accel(*accel, flat, s, camera);
+                const Frame got = render_with(*accel, flat, s, camera);
                 CHECK(double(got.rays) == Approx(double(expected.rays)).epsilon(0.002));
                 CHECK(got.mean == Approx(expected.mean).epsilon(0.01));
             }
         CanopyOptions kd;
         kd.builder = "kdtree";
         const auto accel = built(make_canopy_accelerator(scene, flat, kd));
-        const Frame got = render_accel(*accel, flat, s, camera);
+        const Frame got = render_with(*accel, flat, s, camera);
         INFO(workload_name(w) << " kdtree");
         CHECK(double(got.rays) == Approx(double(expected.rays)).epsilon(0.002));
         CHECK(got.mean == Approx(expected.mean).epsilon(0.01));
@@ -256,12 +237,12 @@ TEST_CASE("every workload: the stream tracer renders the single tracer's pixels"
         const auto accel = built(make_canopy_accelerator(scene, flat, options));
         for (Workload w : {Workload::Camera, Workload::Ao, Workload::Nee}) {
             FrameSettings s = settings_of(w, 40, 30);
-            const Frame single = render_accel(*accel, flat, s, camera, 2);
+            const Frame single = render_with(*accel, flat, s, camera, 2);
             s.tracer = TracerKind::Stream, s.stream_batching = StreamBatching::Wavefront;
             for (uint32_t paths : {1u, 97u, 1u << 16}) {
                 s.stream_paths = paths;
                 INFO(workload_name(w) << " " << kernel << ", " << paths << " paths a batch");
-                const Frame stream = render_accel(*accel, flat, s, camera, 2);
+                const Frame stream = render_with(*accel, flat, s, camera, 2);
                 CHECK(stream.rays == single.rays);
                 CHECK(stream.pixels == single.pixels);
             }
@@ -277,14 +258,14 @@ TEST_CASE("every workload: Embree's single and stream rows trace canopy's rays t
     const auto embree = built(make_embree_accelerator(flat, "medium", 0));
     for (Workload w : {Workload::Diffuse, Workload::Camera, Workload::Ao, Workload::Nee}) {
         FrameSettings s = settings_of(w, 64, 48);
-        const Frame expected = render_accel(*ours, flat, s, camera, 4);
+        const Frame expected = render_with(*ours, flat, s, camera, 4);
         for (bool stream : {false, true})
             for (bool packets : {false, true}) {
                 if (!stream && packets) continue;
                 s.tracer = stream ? TracerKind::Stream : TracerKind::Single;
                 s.stream_batching = StreamBatching::Wavefront, s.embree_packets = packets;
                 INFO(workload_name(w) << (stream ? packets ? " stream/16" : " stream/1m" : " single"));
-                const Frame got = render_accel(*embree, flat, s, camera, 4);
+                const Frame got = render_with(*embree, flat, s, camera, 4);
                 // Embree's intersector is not watertight and its point comes from t, so paths part after a bounce or
                 // two: statistics, not bits, within what diffuse paths differ by here (1.3% rays, 1.3% mean a frame).
                 CHECK(double(got.rays) == Approx(double(expected.rays)).epsilon(0.02));
