@@ -809,6 +809,15 @@ void apply_param_alias(const std::string& flag, const std::string& builder, cons
     if (!used) throw std::invalid_argument(flag + ": only with --builder " + builder);
 }
 
+// --rays replays one scene's recorded rays in place of frames: options about frames contradict it.
+void check_replay_options(const BenchCommand& c, const BenchOptions& b) {
+    if (c.scenes.size() != 1)
+        throw std::invalid_argument("--rays: the rays of one scene, not " + std::to_string(c.scenes.size()) + " scenes (their triangles are numbered per scene)");
+    if (b.dynamic) throw std::invalid_argument("--rays: replays recorded rays, not --dynamic frames");
+    if (b.workload.workload != WorkloadOptions{}.workload)
+        throw std::invalid_argument("--workload " + b.workload.workload + ": --rays replays rays recorded with their own workload");
+}
+
 // The parsed values as BenchOptions, refused (on every rank) where options contradict each other.
 BenchOptions parsed_options(const BenchCommand& c) {
     BenchOptions b = c.options;
@@ -818,6 +827,7 @@ BenchOptions parsed_options(const BenchCommand& c) {
     distributed::checked([&] {
         if (c.rebraid_option->count() && !contains_name(b.toplevels, "rebraid"))
             throw std::invalid_argument("--rebraid-threshold: only with --toplevel rebraid");
+        if (!b.rays_path.empty()) check_replay_options(c, b);
         if (!b.json_path.empty() && distributed::is_root()) check_output_path("--json", b.json_path);
         b.builders = join_builder_specs(b.builders), b.blas_builders = join_builder_specs(b.blas_builders);
         if (c.esc_option->count()) apply_param_alias("--esc-sa-max", "esc", kEscSaMaxKey, c.esc_area_limits, b);
