@@ -218,9 +218,9 @@ Vec3 trace_camera(const Tracer& tracer, const ShadingScene& scene, const Ray& ra
     return camera_radiance(scene, ray, found, surface);
 }
 
-// `ao`: settings.ao_rays cosine-weighted rays of length ao_length from a camera ray's hit; the share of them that
-// reach nothing is the pixel's value (the white sky's irradiance there over pi), 1 on a miss. ao_base is the probes'
-// common origin and interval, its direction the normal facing the camera, about which ao_probe draws each one.
+// `ao`: settings.ao_rays cosine-weighted rays of length ao_length from a camera ray's hit, each made by ao_probe from
+// the first, ao_base; the share of them that reach nothing is the pixel's value (the white sky's irradiance there
+// over pi), 1 on a miss.
 inline Ray ao_base(const ShadingScene& scene, const Ray& ray, const SurfaceHit& surface) {
     const Vec3 n = facing_normal(ray, surface);
     return leaving_ray(surface, n, n, scene.ao_length);
