@@ -297,27 +297,26 @@ public:
     void replay(const FrameSettings& settings, std::span<const RecordedRay> rays, std::span<Hit> hits) const override {
         const EmbreeTracer single{scene_, instances()};
         const EmbreeBatchTracer batches{scene_, instances(), settings.embree_packets};
-        tbb::enumerable_thread_specific<EmbreeBatchTracer::Scratch> scratches;
-        tbb::parallel_for(tbb::blocked_range<size_t>(0, rays.size(), kReplayChunk), [&](const tbb::blocked_range<size_t>& range) {
-            const auto chunk = rays.subspan(range.begin(), range.size());
-            const auto out = hits.subspan(range.begin(), range.size());
-            if (settings.tracer == TracerKind::Single) {
-                for (size_t i = 0; i < chunk.size(); ++i) {
-                    out[i] = Hit{};
-                    if (chunk[i].any) out[i].prim = single.occluded(chunk[i].ray) ? 0 : Hit::kNone;
-                    else single.closest(chunk[i].ray, out[i]);
-                }
-                return;
-            }
-            EmbreeBatchTracer::Scratch& scratch = scratches.local();
+        struct Scratch {
+            EmbreeBatchTracer::Scratch calls;
             std::vector<EmbreeRecord> records;
-            replay_batches(chunk, out, [&](bool any, std::span<const Ray> batch, std::span<Hit> answers) {
-                records.resize(batch.size());
-                if (any) batches.occluded(batch, records, scratch);
-                else batches.closest(batch, records, scratch);
-                for (size_t k = 0; k < batch.size(); ++k) answers[k] = records[k].found() ? Hit{records[k].t, 0, 0, records[k].prim} : Hit{};
+        };
+        replay_chunks<Scratch>(
+            settings.tracer, rays, hits,
+            [&](const Ray& ray, bool any, Hit& hit) {
+                hit = Hit{};
+                if (any) hit.prim = single.occluded(ray) ? 0 : Hit::kNone;
+                else single.closest(ray, hit);
+            },
+            [&](bool any, std::span<const Ray> batch, std::span<Hit> answers, Scratch& scratch) {
+                scratch.records.resize(batch.size());
+                if (any) batches.occluded(batch, scratch.records, scratch.calls);
+                else batches.closest(batch, scratch.records, scratch.calls);
+                for (size_t k = 0; k < batch.size(); ++k) {
+                    const EmbreeRecord& r = scratch.records[k];
+                    answers[k] = r.found() ? Hit{r.t, 0, 0, r.prim} : Hit{};
+                }
             });
-        }, tbb::simple_partitioner());
     }
 
     Hit trace(const Ray& ray) const override {

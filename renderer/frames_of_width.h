@@ -96,42 +96,51 @@ uint64_t count_of_width(const AnyKernel& kernel, const FrameJob& job, tbb::enume
     });
 }
 
-// A chunk's rays of one query kind, gathered for a batch call, and their hits scattered back.
-template <class Trace>
-void replay_batches(std::span<const RecordedRay> rays, std::span<Hit> hits, Trace&& trace) {
-    std::vector<Ray> batch;
-    std::vector<Hit> answers;
-    std::vector<uint32_t> index;
-    for (const bool any : {false, true}) {
-        batch.clear(), index.clear();
-        for (uint32_t i = 0; i < rays.size(); ++i)
-            if (rays[i].any == any) batch.push_back(rays[i].ray), index.push_back(i);
-        answers.resize(batch.size());
-        trace(any, std::span<const Ray>(batch), std::span<Hit>(answers));
-        for (size_t k = 0; k < index.size(); ++k) hits[index[k]] = answers[k];
-    }
+// Recorded rays on every thread, kReplayChunk a task: one at a time through `one(ray, any, hit)` (TracerKind::Single),
+// or each chunk as two batches, its closest-hit rays then its any-hit rays, through `batch(any, rays, hits, scratch)`
+// with the thread's own Scratch. Each thread's gather buffers live across its chunks: a timed pass allocates nothing
+// once warm.
+template <class Scratch, class One, class Batch>
+void replay_chunks(TracerKind tracer, std::span<const RecordedRay> rays, std::span<Hit> hits, One&& one, Batch&& batch) {
+    struct Local {
+        Scratch scratch;
+        std::vector<Ray> rays;
+        std::vector<Hit> answers;
+        std::vector<uint32_t> index;
+    };
+    tbb::enumerable_thread_specific<Local> locals;
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, rays.size(), kReplayChunk), [&](const tbb::blocked_range<size_t>& range) {
+        const auto chunk = rays.subspan(range.begin(), range.size());
+        const auto out = hits.subspan(range.begin(), range.size());
+        if (tracer == TracerKind::Single) {
+            for (size_t i = 0; i < chunk.size(); ++i) one(chunk[i].ray, chunk[i].any, out[i]);
+            return;
+        }
+        Local& local = locals.local();
+        for (const bool any : {false, true}) {
+            local.rays.clear(), local.index.clear();
+            for (uint32_t i = 0; i < chunk.size(); ++i)
+                if (chunk[i].any == any) local.rays.push_back(chunk[i].ray), local.index.push_back(i);
+            local.answers.resize(local.rays.size());
+            batch(any, std::span<const Ray>(local.rays), std::span<Hit>(local.answers), local.scratch);
+            for (size_t k = 0; k < local.index.size(); ++k) out[local.index[k]] = local.answers[k];
+        }
+    }, tbb::simple_partitioner());
 }
 
 template <int N>
 void replay_of_width(const AnyKernel& kernel, const FrameSettings& settings, std::span<const RecordedRay> rays, std::span<Hit> hits) {
     with_kernel_of_width<N>(kernel, [&]<class Kernel>(const Kernel& k) -> uint64_t {
-        tbb::enumerable_thread_specific<typename Kernel::Scratch> scratches;
-        tbb::parallel_for(tbb::blocked_range<size_t>(0, rays.size(), kReplayChunk), [&](const tbb::blocked_range<size_t>& range) {
-            const auto chunk = rays.subspan(range.begin(), range.size());
-            const auto out = hits.subspan(range.begin(), range.size());
-            if (settings.tracer == TracerKind::Single) {
-                for (size_t i = 0; i < chunk.size(); ++i) {
-                    if (chunk[i].any) k.template query<Query::Any>(chunk[i].ray, out[i]);
-                    else k.template query<Query::Closest>(chunk[i].ray, out[i]);
-                }
-                return;
-            }
-            typename Kernel::Scratch& scratch = scratches.local();
-            replay_batches(chunk, out, [&](bool any, std::span<const Ray> batch, std::span<Hit> answers) {
+        replay_chunks<typename Kernel::Scratch>(
+            settings.tracer, rays, hits,
+            [&](const Ray& ray, bool any, Hit& hit) {
+                if (any) k.template query<Query::Any>(ray, hit);
+                else k.template query<Query::Closest>(ray, hit);
+            },
+            [&](bool any, std::span<const Ray> batch, std::span<Hit> answers, typename Kernel::Scratch& scratch) {
                 if (any) k.template batch<Query::Any>(batch, answers, scratch, settings.batch_traversal);
                 else k.template batch<Query::Closest>(batch, answers, scratch, settings.batch_traversal);
             });
-        }, tbb::simple_partitioner());
         return 0;
     });
 }
